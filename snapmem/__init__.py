@@ -1,0 +1,30 @@
+"""snapmem: snap-through of axisymmetric dielectric-elastomer membranes.
+
+A 1D discrete (DDG) model of the membrane's meridian with hyperelastic, electric and pressure
+energies, analytic gradients and banded Hessians, and the solvers that use them.
+
+The public API::
+
+    from snapmem import build_scene, equilibrium
+    scene = build_scene("balloon", nodes=101, E_hat=0.1538)
+    eq = equilibrium(scene, {"pressure": 0.012})
+    eq.measures()["stretch"]
+"""
+
+from .errors import SnapmemError, SolverError
+from .materials import Gent, Law, InvariantLaw, MooneyRivlin, NeoHookean, Yeoh, LAWS, make_law
+from .meridian import Meridian, disc, sphere, torus
+from .newton import Equilibrium, NewtonOptions, NewtonReport, equilibrium, solve
+from .scene import Scene
+from .scenes import SCENES, Parameter, SceneSpec, build_scene, register
+from .terms import Electric, PressureWork, Stretching
+
+__all__ = [
+    "SnapmemError", "SolverError",
+    "Law", "InvariantLaw", "NeoHookean", "MooneyRivlin", "Gent", "Yeoh", "LAWS", "make_law",
+    "Meridian", "disc", "sphere", "torus",
+    "Scene", "Stretching", "Electric", "PressureWork",
+    "Equilibrium", "NewtonOptions", "NewtonReport", "equilibrium", "solve",
+    "SCENES", "SceneSpec", "Parameter", "build_scene", "register",
+]
+__version__ = "0.1.0"

@@ -1,0 +1,69 @@
+"""Errors raised by snapmem and the checks that produce them.
+
+Every message names the parameter, the value it got and what is allowed, so that a user who
+typed it (in Python, on the command line or in a spreadsheet) can fix it without a traceback.
+"""
+
+from __future__ import annotations
+
+import math
+from numbers import Real
+
+
+class SnapmemError(ValueError):
+    """Bad input to snapmem: the message names the parameter, its value and what is allowed."""
+
+
+class SolverError(RuntimeError):
+    """A solve that could not produce a trustworthy answer (the message says why)."""
+
+
+def check_real(name: str, value, *, minimum: float | None = None, maximum: float | None = None,
+               min_inclusive: bool = True, max_inclusive: bool = True) -> float:
+    """Return ``value`` as a finite float, or raise SnapmemError naming ``name``.
+
+    Parameters
+    ----------
+    name : str
+        Parameter name used in the message.
+    value : object
+        The value to check (bools and strings are rejected).
+    minimum, maximum : float, optional
+        Allowed range.
+    min_inclusive, max_inclusive : bool
+        Whether the bounds themselves are allowed.
+    """
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise SnapmemError(f"{name} = {value!r}: must be a real number")
+    value = float(value)
+    if not math.isfinite(value):
+        raise SnapmemError(f"{name} = {value!r}: must be finite")
+    if minimum is not None and (value < minimum or (value == minimum and not min_inclusive)):
+        raise SnapmemError(f"{name} = {value!r}: must be {_range_text(minimum, maximum, min_inclusive, max_inclusive)}")
+    if maximum is not None and (value > maximum or (value == maximum and not max_inclusive)):
+        raise SnapmemError(f"{name} = {value!r}: must be {_range_text(minimum, maximum, min_inclusive, max_inclusive)}")
+    return value
+
+
+def check_int(name: str, value, *, minimum: int | None = None, maximum: int | None = None) -> int:
+    """Return ``value`` as an int within [minimum, maximum], or raise SnapmemError."""
+    if isinstance(value, bool) or isinstance(value, str):
+        raise SnapmemError(f"{name} = {value!r}: must be an integer")
+    try:
+        as_int = int(value)
+    except (TypeError, ValueError, OverflowError):
+        raise SnapmemError(f"{name} = {value!r}: must be an integer") from None
+    if as_int != value:
+        raise SnapmemError(f"{name} = {value!r}: must be an integer")
+    if (minimum is not None and as_int < minimum) or (maximum is not None and as_int > maximum):
+        raise SnapmemError(f"{name} = {value!r}: must be an integer {_range_text(minimum, maximum, True, True)}")
+    return as_int
+
+
+def _range_text(minimum, maximum, min_inclusive, max_inclusive) -> str:
+    parts = []
+    if minimum is not None:
+        parts.append(f"{'>=' if min_inclusive else '>'} {minimum:g}")
+    if maximum is not None:
+        parts.append(f"{'<=' if max_inclusive else '<'} {maximum:g}")
+    return " and ".join(parts) if parts else "any finite value"

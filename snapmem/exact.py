@@ -1,0 +1,58 @@
+"""Exact solutions to test against.
+
+The uniformly inflated incompressible Mooney-Rivlin balloon with a voltage across its thickness
+(Holzapfel; MODEL.md section 6), lam = r / R:
+
+    p_hat = (4 H / R) [ c1_hat (lam^-1 - lam^-7) - c2_hat (lam^-5 - lam) - E_hat^2 lam / 2 ]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import brentq
+
+
+def balloon_pressure(lam, R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat=0.0):
+    """Normalised pressure p/mu of the uniformly inflated balloon at stretch ``lam`` (array ok)."""
+    lam = np.asarray(lam, dtype=float)
+    return 4.0 * H / R * (c1 * (1 / lam - lam ** -7) - c2 * (lam ** -5 - lam) - 0.5 * E_hat ** 2 * lam)
+
+
+def balloon_e_hat(lam, p_hat, R=10.0, H=0.1, c1=0.4375, c2=0.0625):
+    """E_hat at which the balloon at stretch ``lam`` is in equilibrium under p_hat (NaN where none)."""
+    lam = np.asarray(lam, dtype=float)
+    e2 = 2.0 / lam * (c1 * (1 / lam - lam ** -7) - c2 * (lam ** -5 - lam) - p_hat * R / (4.0 * H))
+    return np.sqrt(np.where(e2 >= 0, e2, np.nan))
+
+
+def balloon_pressure_slope(lam, R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat=0.0):
+    """d p_hat / d lam of :func:`balloon_pressure`."""
+    lam = np.asarray(lam, dtype=float)
+    return 4.0 * H / R * (c1 * (7 * lam ** -8 - lam ** -2) + c2 * (5 * lam ** -6 + 1) - 0.5 * E_hat ** 2)
+
+
+def balloon_extrema(R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat=0.0, lam_max=50.0):
+    """[(lam, p_hat), ...] of the pressure extrema (roots of dp/dlam) in 1 < lam < lam_max, ascending.
+
+    For the paper's balloon the first is the limit point (maximum), the second the pressure minimum.
+    """
+    lam = np.geomspace(1.0 + 1e-9, lam_max, 200001)
+    slope = balloon_pressure_slope(lam, R, H, c1, c2, E_hat)
+    out = []
+    for i in np.flatnonzero(np.sign(slope[:-1]) != np.sign(slope[1:])):
+        root = brentq(balloon_pressure_slope, lam[i], lam[i + 1], args=(R, H, c1, c2, E_hat), xtol=1e-15, rtol=1e-15)
+        out.append((float(root), float(balloon_pressure(root, R, H, c1, c2, E_hat))))
+    return out
+
+
+def balloon_limit_point(R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat=0.0):
+    """(lam, p_hat) of the pressure maximum of the balloon curve."""
+    return balloon_extrema(R, H, c1, c2, E_hat)[0]
+
+
+def balloon_stretch(p_hat, R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat=0.0):
+    """Stretch on the rising (stable) branch below the limit point at pressure p_hat."""
+    lam_lp, p_lp = balloon_limit_point(R, H, c1, c2, E_hat)
+    if p_hat > p_lp:
+        raise ValueError(f"p_hat = {p_hat}: above the limit pressure {p_lp}")
+    return brentq(lambda x: balloon_pressure(x, R, H, c1, c2, E_hat) - p_hat, 1.0, lam_lp, xtol=1e-15)

@@ -1,0 +1,341 @@
+"""A scene: a reference meridian, the energy terms it needs, its boundary conditions and loads.
+
+The total potential is Pi(q) = sum of the terms' energies. ``Scene.evaluate`` returns Pi, its
+gradient and its Hessian (the tangent stiffness K) in band storage on the free degrees of
+freedom. This one assembly is what Newton, continuation and time stepping all call.
+
+Free degrees of freedom are numbered so that K is banded: in node order for an open meridian
+(half-bandwidth 3), and for a closed meridian in the interleaved order 0, N-1, 1, N-2, ... that
+puts every edge's two nodes at most two places apart (half-bandwidth 5), so the edge N-1 -> 0
+needs no corner block and the solve stays a plain O(N) band LU.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Iterable, Mapping
+
+import numpy as np
+
+from .banded import BandedMatrix
+from .errors import SnapmemError, check_real
+from .kinematics import EdgeKinematics
+from .materials import Density
+from .meridian import Meridian
+from .terms import DensityTerm, EdgeTerm, Electric, PressureWork, Stretching, Term
+
+
+@dataclass
+class Evaluation:
+    """Result of one assembly at a state q.
+
+    Attributes
+    ----------
+    energy : float
+        Total potential Pi [J].
+    gradient : ndarray (2N,) or None
+        dPi/dq over all degrees of freedom [N]; at fixed ones it is the reaction force (negated).
+    residual : ndarray (n_free,) or None
+        The gradient on the free degrees of freedom, in band order.
+    stiffness : BandedMatrix or None
+        K = d2Pi/dq2 on the free degrees of freedom, in band order [N/m].
+    """
+
+    energy: float
+    gradient: np.ndarray | None
+    residual: np.ndarray | None
+    stiffness: BandedMatrix | None
+
+
+class Scene:
+    """A membrane problem: meridian, energy terms, fixed degrees of freedom and default loads.
+
+    Parameters
+    ----------
+    meridian : Meridian
+        Reference shape.
+    thickness : float
+        Reference thickness H [m].
+    terms : iterable of Term
+        Energy terms; include only the physics the scene needs.
+    fixed : iterable of int
+        Indices in q of degrees of freedom held at their reference value.
+    loads : mapping, optional
+        Default values of load parameters (``pressure`` [Pa], ``voltage`` [V]); every load
+        a term depends on defaults to 0.
+    name : str
+        Name used in reports.
+    parameters : mapping, optional
+        The parameters the scene was built from (recorded beside results).
+    start_guess : callable, optional
+        loads -> q, a Newton starting state where the reference is singular (a flat plate).
+    probes : mapping, optional
+        Named scalar outputs of a state particular to this scene, q -> float (e.g. the
+        balloon's equatorial ``stretch``); they join ``measures``.
+    """
+
+    def __init__(self, meridian: Meridian, thickness: float, terms: Iterable[Term],
+                 fixed: Iterable[int] = (), loads: Mapping[str, float] | None = None,
+                 name: str = "scene", parameters: Mapping | None = None,
+                 start_guess: Callable[[dict], np.ndarray] | None = None,
+                 probes: Mapping[str, Callable[[np.ndarray], float]] | None = None):
+        self.meridian = meridian
+        self.thickness = check_real("H", thickness, minimum=0.0, min_inclusive=False)
+        self.terms = tuple(terms)
+        self.density_terms = [t for t in self.terms if isinstance(t, DensityTerm)]
+        self.edge_terms = [t for t in self.terms if isinstance(t, EdgeTerm)]
+        unknown = [t for t in self.terms if not isinstance(t, (DensityTerm, EdgeTerm))]
+        if unknown:
+            raise SnapmemError(f"terms: {unknown!r} are neither density nor edge terms")
+        n_dof = 2 * meridian.nodes
+        self.fixed = tuple(sorted({int(d) for d in fixed}))
+        if any(d < 0 or d >= n_dof for d in self.fixed):
+            raise SnapmemError(f"fixed = {list(self.fixed)}: degrees of freedom must lie in 0..{n_dof - 1}")
+        self.name = name
+        self.parameters = dict(parameters or {})
+        self.start_guess = start_guess
+        self.probes = dict(probes or {})
+        names = {n for t in self.terms for n in t.loads}
+        self.loads = {n: 0.0 for n in sorted(names)}
+        for key, value in (loads or {}).items():
+            self.loads[key] = check_real(key, value)
+        self.weight = 2.0 * np.pi * meridian.mid_radius * meridian.length * self.thickness  # dV_bar (E,)
+        self._build_dof_map()
+
+    # ----------------------------------------------------------------------------------------
+    # numbering of the free degrees of freedom and the scatter of local blocks into the band
+    def _build_dof_map(self):
+        m = self.meridian
+        n_nodes = m.nodes
+        if m.closed:
+            half = (n_nodes + 1) // 2
+            order = np.empty(n_nodes, dtype=int)
+            order[0::2] = np.arange(half)
+            order[1::2] = np.arange(n_nodes - 1, half - 1, -1)
+        else:
+            order = np.arange(n_nodes)
+        dof_order = (2 * order[:, None] + np.arange(2)).ravel()
+        is_fixed = np.zeros(2 * n_nodes, dtype=bool)
+        is_fixed[list(self.fixed)] = True
+        self.free = dof_order[~is_fixed[dof_order]]          # band position -> dof
+        position = np.full(2 * n_nodes, -1)
+        position[self.free] = np.arange(self.free.size)
+        edges = m.edges
+        self.edge_dofs = np.concatenate([2 * edges[:, :1] + np.arange(2), 2 * edges[:, 1:] + np.arange(2)], axis=1)
+        lpos = position[self.edge_dofs]                          # (E, 4)
+        i, j = lpos[:, :, None], lpos[:, None, :]                # (E, 4, 1), (E, 1, 4)
+        valid = (i >= 0) & (j >= 0)
+        self.bandwidth = b = max(1, int(np.max(np.where(valid, np.abs(i - j), 0))))
+        rows = 3 * b + 1
+        flat = j * rows + (2 * b + i - j)                        # position in ab.T (C order)
+        self._hess_mask = valid.ravel()
+        self._hess_index = np.broadcast_to(flat, valid.shape).ravel()[self._hess_mask]
+        self._band_size = rows * self.free.size
+
+    @property
+    def n_free(self) -> int:
+        return self.free.size
+
+    def reference_state(self) -> np.ndarray:
+        """q of the reference shape, shape (2N,)."""
+        return self.meridian.q
+
+    def resolve_loads(self, loads: Mapping[str, float] | None) -> dict:
+        """The scene's default loads updated by ``loads``; unknown names are an error."""
+        out = dict(self.loads)
+        for key, value in (loads or {}).items():
+            if key not in out:
+                raise SnapmemError(f"load {key!r}: this scene has no such load; it has {sorted(out) or 'none'}")
+            out[key] = float(value)
+        return out
+
+    # ----------------------------------------------------------------------------------------
+    # assembly
+    def kinematics(self, q: np.ndarray) -> EdgeKinematics:
+        return EdgeKinematics.of(self.meridian, q)
+
+    def density(self, kin: EdgeKinematics, loads) -> Density | None:
+        """Sum of the density terms' densities, or None if the scene has none."""
+        total = None
+        for term in self.density_terms:
+            d = term.density(kin, loads)
+            total = d if total is None else total + d
+        return total
+
+    def evaluate(self, q: np.ndarray, loads: Mapping[str, float] | None = None, order: int = 2) -> Evaluation:
+        """Total potential (order 0), its gradient (order >= 1) and stiffness (order 2) at q.
+
+        Parameters
+        ----------
+        q : ndarray (2N,)
+            State [m].
+        loads : mapping, optional
+            Load values overriding the scene's defaults.
+        order : {0, 1, 2}
+        """
+        loads = self.resolve_loads(loads)
+        kin = self.kinematics(q)
+        energy = 0.0
+        grad_local = hess_local = None
+        dens = self.density(kin, loads)
+        if dens is not None:
+            energy += float(self.weight @ dens.w)
+            if order >= 1:
+                grad_local, hess_local = _chain_rule(kin, dens, self.weight, order)
+        for term in self.edge_terms:
+            e, g, h = term.edge_local(kin, loads, order)
+            energy += e
+            if order >= 1:
+                grad_local = g if grad_local is None else grad_local + g
+            if order >= 2:
+                hess_local = h if hess_local is None else hess_local + h
+        if order < 1:
+            return Evaluation(energy, None, None, None)
+        gradient = np.bincount(self.edge_dofs.ravel(), grad_local.ravel(), minlength=q.size)
+        stiffness = None
+        if order >= 2:
+            values = hess_local.reshape(-1)[self._hess_mask]
+            band = np.bincount(self._hess_index, values, minlength=self._band_size)
+            stiffness = BandedMatrix(band.reshape(self.n_free, 3 * self.bandwidth + 1).T, self.bandwidth)
+        return Evaluation(energy, gradient, gradient[self.free], stiffness)
+
+    def energy(self, q, loads=None) -> float:
+        return self.evaluate(q, loads, order=0).energy
+
+    def gradient(self, q, loads=None) -> np.ndarray:
+        """dPi/dq over all degrees of freedom, shape (2N,) [N]."""
+        return self.evaluate(q, loads, order=1).gradient
+
+    def load_derivative(self, q: np.ndarray, name: str, loads: Mapping[str, float] | None = None) -> np.ndarray:
+        """d(residual)/d(load ``name``) on the free degrees of freedom, shape (n_free,)."""
+        loads = self.resolve_loads(loads)
+        if name not in loads:
+            raise SnapmemError(f"load {name!r}: this scene has no such load; it has {sorted(loads) or 'none'}")
+        kin = self.kinematics(q)
+        local = np.zeros((kin.l.size, 4))
+        for term in self.density_terms:
+            if name in term.loads:
+                local += _chain_rule(kin, term.load_density(kin, loads, name), self.weight, 1)[0]
+        for term in self.edge_terms:
+            if name in term.loads:
+                local += term.load_gradient(kin, loads, name)
+        return np.bincount(self.edge_dofs.ravel(), local.ravel(), minlength=q.size)[self.free]
+
+    # ----------------------------------------------------------------------------------------
+    # the domain every state must stay in
+    def inadmissible(self, q: np.ndarray) -> str | None:
+        """Why q is outside the model's domain (negative radius, zero length, material lock), or None."""
+        if not np.all(np.isfinite(q)):
+            return "state has NaN or inf"
+        r = q[0::2]
+        free_r = np.ones(r.size, dtype=bool)
+        free_r[[d // 2 for d in self.fixed if d % 2 == 0]] = False
+        if np.any(r[free_r] <= 0):
+            return f"radius of node {int(np.flatnonzero(free_r & (r <= 0))[0])} is not positive"
+        kin = self.kinematics(q)
+        if np.any(kin.l <= 0):
+            return "an edge has collapsed to zero length"
+        for term in self.density_terms:
+            ok = term.admissible(kin)
+            if not np.all(ok):
+                return f"edge {int(np.flatnonzero(~ok)[0])} is outside the domain of {term!r}"
+        return None
+
+    def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
+        """Largest step fraction alpha <= 1 keeping free radii positive (fraction to boundary 0.9)."""
+        r, dr = q[0::2], dq[0::2]
+        shrinking = (dr < 0) & (r > 0)
+        if not np.any(shrinking):
+            return 1.0
+        return float(min(1.0, 0.9 * np.min(r[shrinking] / -dr[shrinking])))
+
+    # ----------------------------------------------------------------------------------------
+    # outputs
+    @property
+    def mu(self) -> float:
+        """Shear modulus [Pa] of the stretching law (normalises pressure and voltage)."""
+        for term in self.density_terms:
+            if isinstance(term, Stretching):
+                return float(term.law.mu)
+        raise SnapmemError(f"scene {self.name!r} has no stretching term, so no shear modulus")
+
+    @property
+    def permittivity(self) -> float | None:
+        for term in self.density_terms:
+            if isinstance(term, Electric):
+                return term.permittivity
+        return self.parameters.get("eps")
+
+    def e_hat(self, voltage: float) -> float:
+        """Normalised electric load E_hat = (phi/H) sqrt(eps/mu) of a voltage phi [V]."""
+        eps = self.permittivity
+        return 0.0 if eps is None else voltage / self.thickness * np.sqrt(eps / self.mu)
+
+    def volume(self, q: np.ndarray) -> float:
+        """Volume enclosed by the revolved meridian [m^3] (above z = 0 for an open one ending there)."""
+        return float(PressureWork.volume_local(self.kinematics(q), 0)[0].sum())
+
+    def displacement(self, q: np.ndarray) -> np.ndarray:
+        """Node displacement magnitudes |x - x_bar|, shape (N,) [m]."""
+        d = q - self.meridian.q
+        return np.hypot(d[0::2], d[1::2])
+
+    def stretches(self, q: np.ndarray):
+        """(lam1, lam2) of every edge, each of shape (E,)."""
+        kin = self.kinematics(q)
+        return kin.lam1, kin.lam2
+
+    def tensions(self, q: np.ndarray, loads=None):
+        """Principal membrane tensions (T1 meridional, T2 hoop) of every edge [N/m], each (E,).
+
+        T1 = (H/lam2) dW/dlam1, T2 = (H/lam1) dW/dlam2 with W the sum of all densities
+        (electric term included). Non-positive tension means wrinkling or slack.
+        """
+        kin = self.kinematics(q)
+        dens = self.density(kin, self.resolve_loads(loads))
+        return self.thickness / kin.lam2 * dens.w1, self.thickness / kin.lam1 * dens.w2
+
+    def measures(self, q: np.ndarray, loads=None) -> dict:
+        """Scalar outputs of a state: volume, u_max, stretch_max, min_tension, taut."""
+        lam1, lam2 = self.stretches(q)
+        t1, t2 = self.tensions(q, loads)
+        min_tension = float(min(t1.min(), t2.min()))
+        out = {"volume": self.volume(q), "u_max": float(self.displacement(q).max()),
+               "stretch_max": float(max(lam1.max(), lam2.max())),
+               "min_tension": min_tension, "taut": bool(min_tension > 0)}
+        out.update({name: float(probe(q)) for name, probe in self.probes.items()})
+        return out
+
+    @property
+    def force_scale(self) -> float:
+        """Characteristic force mu H L [N], used for residual tolerances."""
+        return self.mu * self.thickness * self.meridian.size
+
+    def __repr__(self):
+        return (f"Scene({self.name!r}, nodes={self.meridian.nodes}, terms={[type(t).__name__ for t in self.terms]}, "
+                f"fixed={list(self.fixed)}, loads={self.loads})")
+
+
+def _chain_rule(kin: EdgeKinematics, dens: Density, weight: np.ndarray, order: int):
+    """Edge gradient (E, 4) and Hessian (E, 4, 4) of sum_e weight_e W(lam1_e, lam2_e).
+
+    The one place where material derivatives meet strain derivatives:
+    g = wt (W1 g1 + W2 g2), H = wt (W11 g1 g1 + W12 (g1 g2 + g2 g1) + W22 g2 g2 + W1 d2lam1).
+    """
+    g1 = kin.lam1_gradient()
+    g2 = kin.lam2_gradient()
+    grad = (weight * dens.w1)[:, None] * g1 + (weight * dens.w2)[:, None] * g2
+    if order < 2:
+        return grad, None
+    a11, a12, a22 = (weight * dens.w11), (weight * dens.w12), (weight * dens.w22)
+    hess = (a11[:, None, None] * g1[:, :, None] * g1[:, None, :]
+            + a12[:, None, None] * (g1[:, :, None] * g2[:, None, :] + g2[:, :, None] * g1[:, None, :])
+            + a22[:, None, None] * g2[:, :, None] * g2[:, None, :])
+    arr, arz, azz = kin.lam1_hessian_block()
+    c = weight * dens.w1
+    block = np.stack([np.stack([arr, arz], -1), np.stack([arz, azz], -1)], -2) * c[:, None, None]  # (E, 2, 2)
+    hess[:, :2, :2] += block
+    hess[:, 2:, 2:] += block
+    hess[:, :2, 2:] -= block
+    hess[:, 2:, :2] -= block
+    return grad, hess

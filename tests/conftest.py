@@ -1,0 +1,25 @@
+import numpy as np
+import pytest
+
+from snapmem.meridian import disc, sphere, torus
+
+
+def perturbed(meridian, fixed, rng, scale=0.05, stretch=1.3):
+    """A random state near a uniformly stretched reference, fixed dofs at their reference values."""
+    q0 = meridian.q
+    q = q0 * stretch + rng.normal(scale=scale * meridian.size / meridian.nodes ** 0.5, size=q0.size)
+    q[fixed] = q0[fixed]
+    return q
+
+
+# the three reference shapes with their boundary conditions (closed meridian included)
+SHAPES = {
+    "disc": (lambda: disc(7.5, 11), lambda n: [0, 1, 2 * (n - 1)]),
+    "sphere": (lambda: sphere(10.0, 11), lambda n: [0, 1, 2 * (n - 1)]),
+    "torus": (lambda: torus(10.0, 2.0, 12), lambda n: [1]),
+}
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
