@@ -100,3 +100,66 @@ class BandedLU:
         """Solve K x = rhs for rhs of shape (n,) or (n, k)."""
         x, info = dgbtrs(self._lu, self.b, self.b, rhs, self._piv)
         return x
+
+
+class BorderedMatrix:
+    """The matrix [[A, B], [C^T, D]] with A banded (or itself bordered) and k border rows/columns.
+
+    Continuation's extended systems have this shape (A = K, B = dR/dlambda, C = the tangent), as
+    does volume control (B = C = grad V). Solved by block elimination with one step of iterative
+    refinement (BEMW, Govaerts & Pryce 1990), which stays accurate when A is singular but the
+    whole matrix is not: at a fold K is singular and the arclength system is regular.
+
+    Parameters
+    ----------
+    A : BandedMatrix or BorderedMatrix, order n
+    B, C : ndarray, shape (n, k)
+    D : ndarray, shape (k, k)
+    """
+
+    def __init__(self, A, B, C, D):
+        self.A = A
+        self.B = np.asarray(B, dtype=float).reshape(A.n, -1)
+        self.C = np.asarray(C, dtype=float).reshape(A.n, -1)
+        self.D = np.asarray(D, dtype=float).reshape(self.B.shape[1], self.B.shape[1])
+
+    @property
+    def n(self) -> int:
+        return self.A.n + self.D.shape[0]
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        n = self.A.n
+        if x.ndim == 2:
+            return np.stack([self.matvec(col) for col in x.T], axis=1)
+        top = self.A.matvec(x[:n]) + self.B @ x[n:]
+        return np.concatenate([top, self.C.T @ x[:n] + self.D @ x[n:]])
+
+    def to_dense(self) -> np.ndarray:
+        return np.block([[self.A.to_dense(), self.B], [self.C.T, self.D]])
+
+    def lu(self) -> "BorderedLU":
+        return BorderedLU(self)
+
+
+class BorderedLU:
+    """Factorisation of a :class:`BorderedMatrix`: LU of A and the k x k Schur complement."""
+
+    def __init__(self, M: BorderedMatrix):
+        self.M = M
+        self.inner = M.A.lu()
+        self.Z = self.inner.solve(M.B)                   # A^-1 B, (n, k)
+        self.S = M.D - M.C.T @ self.Z                      # Schur complement (k, k)
+        self.singular = bool(self.inner.singular or not np.all(np.isfinite(self.S))
+                             or abs(np.linalg.det(self.S)) == 0.0)
+
+    def _eliminate(self, rhs):
+        n = self.M.A.n
+        f, g = rhs[:n], rhs[n:]
+        y = self.inner.solve(f)
+        mu = np.linalg.solve(self.S, g - self.M.C.T @ y)
+        return np.concatenate([y - self.Z @ mu, mu])
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve M x = rhs (rhs of shape (n,) or (n, m)); one refinement step."""
+        x = self._eliminate(rhs)
+        return x + self._eliminate(rhs - self.M.matvec(x))

@@ -1,0 +1,846 @@
+"""Pseudo-arclength continuation of equilibria, their stability, and their critical points.
+
+A branch is traced in a control parameter lambda: a load (``pressure`` [Pa], ``voltage`` [V],
+or the normalised ``E_hat``), or the enclosed ``volume`` [m^3] (then the pressure is an unknown,
+the Lagrange multiplier of the volume constraint, and pressure maxima are passed without a jump).
+
+Each step predicts along the unit tangent and corrects with Newton on the extended system
+[R(x, lambda); <t, (x, lambda) - (x0, lambda0)> - ds] = 0, whose Jacobian is K bordered by
+dR/dlambda and the tangent: it stays regular at a fold where K is singular, and is solved by
+block elimination with refinement (snapmem.banded.BorderedMatrix), so every solve is O(N).
+
+At every accepted point the smallest eigenvalues of K on the free degrees of freedom and their
+negative count (the inertia index) are recorded. When the count changes between two points, the
+eigenvalue that crossed zero is followed along the arclength and its root found by Brent's
+method, which locates the critical point to near machine precision on the mesh; its null vector
+phi0 classifies it (MODEL.md section 3): a limit point (LP) has phi0 . dR/dlambda != 0, a
+bifurcation point (BP) has phi0 . dR/dlambda = 0.
+
+Lengths in the arclength are scaled: state changes by L sqrt(N) (L the meridian size, so that
+a uniform stretch of the whole membrane counts the same at any N), the parameter by its scale
+(pressure mu H / L, voltage H sqrt(mu / eps), volume ten reference volumes, or 10 L^3).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Mapping
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import brentq
+
+from .banded import BorderedMatrix
+from .errors import SnapmemError, SolverError, check_int, check_real
+from .newton import equilibrium, start_guess
+from .scene import Scene
+
+log = logging.getLogger(__name__)
+
+CONTROLS = ("pressure", "voltage", "E_hat", "volume")
+
+
+# ----------------------------------------------------------------------------------------------
+# options and results
+@dataclass(frozen=True)
+class ContinuationOptions:
+    """Options of :func:`trace`, with their defaults.
+
+    Attributes
+    ----------
+    ds : float
+        First step length (scaled arclength, dimensionless), default 0.05.
+    ds_min, ds_max : float
+        Step bounds, default 1e-6 and 0.3.
+    max_steps : int
+        Accepted steps at most, default 2000.
+    newton_tol : float
+        Corrector tolerance on max |R| relative to the scene's force scale, default 1e-10.
+    max_corrector_iterations : int
+        Default 8; more means the step is cut.
+    target_iterations : int
+        Corrector iterations aimed at; fewer grow the step, more shrink it. Default 3.
+    max_angle : float
+        Largest angle between consecutive tangents [rad] before a step is cut, default 0.3.
+    n_eigs : int
+        Smallest eigenvalues watched at every point, default 3.
+    stability : bool
+        Compute eigenvalues and inertia at every point (default True).
+    locate : bool
+        Locate critical points precisely (default True).
+    stop_at_first_limit : bool
+        Stop the trace at the first limit point (default False).
+    save_at : tuple of float
+        Values of the control parameter at which points are located exactly (not interpolated).
+    direction : int
+        +1 to start with the parameter increasing, -1 decreasing.
+    """
+
+    ds: float = 0.05
+    ds_min: float = 1e-6
+    ds_max: float = 0.3
+    max_steps: int = 2000
+    newton_tol: float = 1e-10
+    max_corrector_iterations: int = 8
+    target_iterations: int = 3
+    max_angle: float = 0.3
+    n_eigs: int = 3
+    stability: bool = True
+    locate: bool = True
+    stop_at_first_limit: bool = False
+    save_at: tuple = ()
+    direction: int = 1
+
+    def __post_init__(self):
+        check_real("ds", self.ds, minimum=0.0, min_inclusive=False)
+        check_real("ds_min", self.ds_min, minimum=0.0, min_inclusive=False)
+        check_real("ds_max", self.ds_max, minimum=self.ds_min)
+        check_int("max_steps", self.max_steps, minimum=1)
+        check_real("newton_tol", self.newton_tol, minimum=0.0, min_inclusive=False)
+        check_int("max_corrector_iterations", self.max_corrector_iterations, minimum=1)
+        check_int("target_iterations", self.target_iterations, minimum=1)
+        check_real("max_angle", self.max_angle, minimum=0.0, min_inclusive=False, maximum=math.pi)
+        check_int("n_eigs", self.n_eigs, minimum=1)
+        if self.direction not in (1, -1):
+            raise SnapmemError(f"direction = {self.direction!r}: must be +1 or -1")
+        object.__setattr__(self, "save_at", tuple(check_real("save_at", v) for v in self.save_at))
+
+
+@dataclass
+class Point:
+    """One equilibrium on a branch: the state, the control value and what was measured there."""
+
+    x: np.ndarray            # unknowns of the problem (free dofs, + pressure under volume control)
+    lam: float               # control parameter
+    tangent: np.ndarray | None = None   # unit tangent (x part, lambda part), shape (n + 1,)
+    eigs: np.ndarray | None = None
+    negative: int | None = None
+    s: float = 0.0           # arclength from the start
+    ds: float = 0.0          # the step that reached it
+    iterations: int = 0      # corrector iterations
+    kind: str = ""           # '', 'LP', 'BP', 'SAVE', 'END'
+    located: bool = False
+    coupling: float = float("nan")   # |phi0 . dR/dlambda| / (|phi0| |dR/dlambda|) at a critical point
+
+    @property
+    def test_value(self) -> float:
+        return float("nan") if self.eigs is None else float(self.eigs[0])
+
+
+@dataclass
+class Branch:
+    """A traced branch: the points table, the critical points and everything to restart from.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        One row per point (accepted steps, located critical points, save_at points), in
+        arclength order: pressure, voltage, E_hat, volume, u_max, stretch_max, min_eig,
+        negative_eigs, stable, min_tension, taut, point ('' or 'LP' or 'BP'), and the scene's probes.
+    points : pandas.DataFrame
+        The critical points: ``kind`` and the same quantities at the located point, ``located``
+        (False if only bracketed) and ``coupling`` (|phi0 . dR/dlambda| normalised).
+    rejections : pandas.DataFrame
+        Every rejected or cut step: step, s, ds, reason.
+    status : str
+        Why the trace stopped.
+    """
+
+    scene: Scene
+    control: str
+    table: pd.DataFrame
+    points: pd.DataFrame
+    rejections: pd.DataFrame
+    status: str
+    states: list = field(repr=False, default_factory=list)
+    stats: dict = field(default_factory=dict)
+
+    def limit_points(self) -> pd.DataFrame:
+        return self.points[self.points["kind"] == "LP"]
+
+    def save(self, path) -> None:
+        """Save every point's state, tangent, inertia and step as a compressed .npz (no pickle).
+
+        Arrays: ``x`` (M, n) unknowns, ``q`` (M, 2N) full states, ``lam`` (M,), ``tangent``
+        (M, n + 1; NaN where none), ``negative_eigs`` (M,), ``s``, ``ds``, ``kind`` (M,) str,
+        and ``meta``, a JSON string with the scene name and parameters and the control.
+        """
+        M = len(self.states)
+        n = self.states[0].x.size if M else 0
+        tangent = np.full((M, n + 1), np.nan)
+        for i, p in enumerate(self.states):
+            if p.tangent is not None:
+                tangent[i] = p.tangent
+        problem = make_problem(self.scene, self.control)
+        np.savez_compressed(
+            path, x=np.array([p.x for p in self.states]), lam=np.array([p.lam for p in self.states]),
+            q=np.array([problem.state(p.x, p.lam)[0] for p in self.states]), tangent=tangent,
+            negative_eigs=np.array([-1 if p.negative is None else p.negative for p in self.states]),
+            s=np.array([p.s for p in self.states]), ds=np.array([p.ds for p in self.states]),
+            kind=np.array([p.kind for p in self.states], dtype=str),
+            meta=np.array(json.dumps({"scene": self.scene.name, "parameters": _jsonable(self.scene.parameters),
+                                      "control": self.control})))
+
+
+def load_points(path) -> dict:
+    """Read a branch file written by :meth:`Branch.save` (no pickle); returns its arrays and meta."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            out = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError) as exc:
+        raise SnapmemError(f"branch file {str(path)!r}: cannot be read ({exc})") from None
+    for key in ("x", "lam", "meta"):
+        if key not in out:
+            raise SnapmemError(f"branch file {str(path)!r}: has no {key!r} array; not a snapmem branch")
+    out["meta"] = json.loads(str(out["meta"]))
+    return out
+
+
+def _jsonable(d):
+    return {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in d.items()}
+
+
+# ----------------------------------------------------------------------------------------------
+# problems: what is continued
+class LoadProblem:
+    """Equilibria R(q; loads) = 0 with one load as the parameter: x = free dofs."""
+
+    def __init__(self, scene: Scene, control: str):
+        self.scene, self.control = scene, control
+        self.base = scene.resolve_loads(None)
+        load = "voltage" if control == "E_hat" else control
+        if load not in self.base:
+            raise SnapmemError(f"control = {control!r}: scene {scene.name!r} has no {load} load "
+                               f"(it has {sorted(self.base) or 'none'}); "
+                               + ("build it with with_loads=('voltage',)" if load == "voltage" else ""))
+        self.load = load
+        # d load / d lambda
+        self.factor = 1.0 if control != "E_hat" else scene.thickness * math.sqrt(scene.mu / scene.permittivity)
+        L = scene.meridian.size
+        self.x_weight = np.full(scene.n_free, 1.0 / (L * L * scene.meridian.nodes))
+        self.lam_scale = {"pressure": scene.mu * scene.thickness / L,
+                          "voltage": scene.thickness * math.sqrt(scene.mu / (scene.permittivity or 1.0)),
+                          "E_hat": 1.0}[control]
+
+    @property
+    def n(self) -> int:
+        return self.scene.n_free
+
+    def loads(self, lam: float) -> dict:
+        return {**self.base, self.load: lam * self.factor}
+
+    def state(self, x, lam):
+        """(q full, loads) of unknowns x at parameter lam."""
+        q = self.scene.reference_state()
+        q[self.scene.free] = x
+        return q, self.loads(lam)
+
+    def x_of(self, q) -> np.ndarray:
+        return q[self.scene.free].copy()
+
+    def lam_of(self, loads) -> float:
+        return loads[self.load] / self.factor
+
+    def evaluate(self, x, lam, order=2):
+        q, loads = self.state(x, lam)
+        ev = self.scene.evaluate(q, loads, order)
+        return ev.residual, ev.stiffness
+
+    def dF_dlam(self, x, lam):
+        q, loads = self.state(x, lam)
+        return self.scene.load_derivative(q, self.load, loads) * self.factor
+
+    def inadmissible(self, x, lam):
+        return self.scene.inadmissible(self.state(x, lam)[0])
+
+    def stability(self, K, x, lam, n_eigs):
+        eigs = K.smallest_eigenvalues(n_eigs)
+        return eigs, K.negative_count(eigs)
+
+    def measures(self, x, lam) -> dict:
+        q, loads = self.state(x, lam)
+        return {"pressure": loads.get("pressure", 0.0), "voltage": loads.get("voltage", 0.0),
+                "E_hat": self.scene.e_hat(loads.get("voltage", 0.0)), **self.scene.measures(q, loads)}
+
+
+class VolumeProblem(LoadProblem):
+    """Volume control: x = (free dofs, pressure), parameter V0, equations R = 0 and V(q) = V0.
+
+    Stability is that of K on the tangent space of V = const: by Haynsworth's inertia formula
+    the constrained negative count is neg(K) - 1 if g^T K^-1 g < 0 (g = grad V), else neg(K).
+    """
+
+    def __init__(self, scene: Scene):
+        super().__init__(scene, "pressure")
+        self.control = "volume"
+        L = scene.meridian.size
+        self.p_scale = self.lam_scale
+        self.x_weight = np.append(self.x_weight, 1.0 / self.p_scale ** 2)
+        v0 = abs(scene.volume(scene.reference_state()))
+        # a balloon's volume grows ~ lam^3: ten reference volumes keep the state part of the
+        # arclength in charge of the step, as it is under pressure control
+        self.lam_scale = 10.0 * (v0 if v0 > 0 else L ** 3)
+
+    @property
+    def n(self) -> int:
+        return self.scene.n_free + 1
+
+    def state(self, x, lam):
+        q = self.scene.reference_state()
+        q[self.scene.free] = x[:-1]
+        return q, {**self.base, "pressure": float(x[-1])}
+
+    def x_of(self, q, pressure=0.0):
+        return np.append(q[self.scene.free], pressure)
+
+    def lam_of(self, loads) -> float:
+        raise SnapmemError("volume control: the volume is an output; start from a state")
+
+    def evaluate(self, x, lam, order=2):
+        q, loads = self.state(x, lam)
+        ev = self.scene.evaluate(q, loads, order)
+        g = -self.scene.load_derivative(q, "pressure", loads)                     # grad V (free)
+        F = np.append(ev.residual, self.scene.volume(q) - lam)
+        J = None if order < 2 else BorderedMatrix(ev.stiffness, -g, g, [[0.0]])
+        return F, J
+
+    def dF_dlam(self, x, lam):
+        d = np.zeros(self.n)
+        d[-1] = -1.0
+        return d
+
+    def stability(self, J, x, lam, n_eigs):
+        K = J.A
+        eigs = K.smallest_eigenvalues(n_eigs)
+        neg = K.negative_count(eigs)
+        g = J.C[:, 0]
+        lu = K.lu()
+        if not lu.singular and g @ lu.solve(g) < 0:
+            neg -= 1
+        return eigs, neg
+
+
+
+def make_problem(scene: Scene, control: str):
+    if control not in CONTROLS:
+        raise SnapmemError(f"control = {control!r}: must be one of {', '.join(CONTROLS)}")
+    if control == "volume":
+        if "pressure" not in scene.loads:
+            raise SnapmemError(f"control = 'volume': scene {scene.name!r} has no pressure term")
+        return VolumeProblem(scene)
+    return LoadProblem(scene, control)
+
+
+# ----------------------------------------------------------------------------------------------
+# the predictor-corrector
+class _Tracer:
+    def __init__(self, problem, options: ContinuationOptions, scene: Scene):
+        self.pb, self.opt, self.scene = problem, options, scene
+        self.tol = options.newton_tol * scene.force_scale
+        self.wx, self.wl = problem.x_weight, 1.0 / problem.lam_scale ** 2
+        self.newton_iterations = 0
+        self.evaluations = 0
+
+    def inner(self, a, b):
+        return float(a[:-1] @ (self.wx * b[:-1]) + self.wl * a[-1] * b[-1])
+
+    def tangent(self, x, lam, J, previous: np.ndarray | None):
+        """Unit tangent at (x, lam), oriented along ``previous`` (or the chosen direction)."""
+        Fl = self.pb.dF_dlam(x, lam)
+        if previous is None:
+            row, corner = np.zeros(x.size), [[1.0]]
+        else:
+            row, corner = self.wx * previous[:-1], [[self.wl * previous[-1]]]
+        M = BorderedMatrix(J, Fl, row, corner)
+        lu = M.lu()
+        if lu.singular:
+            raise SolverError("singular extended Jacobian: cannot compute the tangent")
+        rhs = np.zeros(x.size + 1)
+        rhs[-1] = 1.0
+        t = lu.solve(rhs)
+        t /= math.sqrt(self.inner(t, t))
+        if previous is None:
+            t *= self.opt.direction
+        return t
+
+    def correct(self, base: Point, s: float):
+        """Newton on the arclength system from the predictor base + s t. Returns (Point, J) or (None, why)."""
+        t = base.tangent
+        x = base.x + s * t[:-1]
+        lam = base.lam + s * t[-1]
+        row, corner = self.wx * t[:-1], [[self.wl * t[-1]]]
+        for it in range(self.opt.max_corrector_iterations + 1):
+            why = self.pb.inadmissible(x, lam)
+            if why is not None:
+                return None, f"left the model's domain ({why})"
+            F, J = self.pb.evaluate(x, lam)
+            self.evaluations += 1
+            g = self.inner(t, np.append(x - base.x, lam - base.lam)) - s
+            norm = float(np.max(np.abs(F)))
+            if not np.isfinite(norm):
+                return None, "residual not finite"
+            if norm <= self.tol and abs(g) <= 1e-12 * max(abs(s), 1e-300) + 1e-14:
+                return Point(x, lam, iterations=it), J
+            if it == self.opt.max_corrector_iterations:
+                return None, f"corrector did not converge in {it} iterations (|R| = {norm:.2e})"
+            M = BorderedMatrix(J, self.pb.dF_dlam(x, lam), row, corner)
+            lu = M.lu()
+            if lu.singular:
+                return None, "singular extended Jacobian"
+            d = lu.solve(-np.append(F, g))
+            self.newton_iterations += 1
+            x, lam = x + d[:-1], lam + d[-1]
+        return None, "corrector failed"
+
+    def finish(self, p: Point, J, previous_tangent):
+        """Tangent and stability at a converged point."""
+        p.tangent = self.tangent(p.x, p.lam, J, previous_tangent)
+        if self.opt.stability:
+            p.eigs, p.negative = self.pb.stability(J, p.x, p.lam, self.opt.n_eigs)
+        return p
+
+    def point_at(self, base: Point, s: float):
+        """The converged point at arclength s from base (with eigenvalues), or raise SolverError."""
+        p, J = self.correct(base, s)
+        if p is None:
+            raise SolverError(f"corrector failed while locating: {J}")
+        p.s = base.s + s
+        return self.finish(p, J, base.tangent), J
+
+
+def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | None = None,
+          options: ContinuationOptions = ContinuationOptions(), start: tuple | None = None,
+          progress: Callable[[Point, dict], None] | None = None) -> Branch:
+    """Trace the equilibrium branch of ``scene`` in ``control`` by pseudo-arclength continuation.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene; its loads give the start (e.g. pressure = 0) for load controls.
+    control : {'pressure', 'voltage', 'E_hat', 'volume'}
+        The parameter varied.
+    until : mapping NAME -> value, optional
+        Stop when any output column (e.g. ``stretch_max``, ``pressure``, ``u_max``) reaches the
+        value, the last point located on it exactly. Default: none (``max_steps`` stops it).
+    options : ContinuationOptions
+    start : (q, loads), optional
+        Start from this state (e.g. a row of a saved branch) instead of solving for one.
+    progress : callable, optional
+        Called as progress(point, row) after every accepted point.
+
+    Returns
+    -------
+    Branch
+    """
+    pb = make_problem(scene, control)
+    until = dict(until or {})
+    tracer = _Tracer(pb, options, scene)
+    x0, lam0 = _start(scene, pb, control, start)
+    F, J = pb.evaluate(x0, lam0)
+    if np.max(np.abs(F)) > 1e3 * tracer.tol:
+        raise SolverError(f"start state is not an equilibrium (max |R| = {np.max(np.abs(F)):.3e})")
+    first = tracer.finish(Point(x0, lam0), J, None)
+    points = [first]
+    rejections = []
+    critical = []
+    ds = options.ds
+    status = f"max_steps ({options.max_steps}) reached"
+    save_at = sorted(options.save_at)
+    for step in range(options.max_steps):
+        base = points[-1]
+        p, J = tracer.correct(base, ds)
+        reason = J if p is None else None
+        if p is not None:
+            p.s, p.ds = base.s + ds, ds
+            try:
+                tracer.finish(p, J, base.tangent)
+            except SolverError as exc:
+                reason = str(exc)
+        if reason is None:
+            angle = math.acos(max(-1.0, min(1.0, tracer.inner(base.tangent, p.tangent))))
+            if angle > options.max_angle and ds > options.ds_min:
+                reason = f"tangent turned by {angle:.3f} rad > max_angle"
+            elif (options.stability and abs(p.negative - base.negative) >= 2 and ds > options.ds_min):
+                reason = f"negative eigenvalue count jumped {base.negative} -> {p.negative}: may straddle two critical points"
+        if reason is not None:
+            rejections.append({"step": step, "s": base.s, "ds": ds, "reason": reason})
+            log.info("step %d cut (ds = %.3g): %s", step, ds, reason)
+            ds *= 0.5
+            if ds < options.ds_min:
+                status = f"step too small (ds < {options.ds_min:g}) after: {reason}"
+                break
+            continue
+        # a critical point between base and p?
+        new_critical = []
+        if options.stability and p.negative != base.negative:
+            new_critical.append(_locate_critical(tracer, base, p))
+        elif options.stability and len(points) >= 2:
+            new_critical.extend(_touching(tracer, points[-2], base, p))
+        # exact points on save_at values and at the until values
+        inserts = [c for c in new_critical if c is not None]
+        for value in save_at:
+            if (base.lam - value) * (p.lam - value) < 0:
+                q = _locate_value(tracer, base, p, lambda pt: pt.lam - value, "SAVE")
+                if q is not None:
+                    inserts.append(q)
+        stop_point, stop_name = None, None
+        for name, value in until.items():
+            f0 = _output(pb, base, name) - value
+            f1 = _output(pb, p, name) - value
+            if f0 * f1 <= 0 and f1 != f0:
+                stop_point = _locate_value(tracer, base, p, lambda pt, n=name, v=value: _output(pb, pt, n) - v, "END")
+                stop_name = f"{name} reached {value:g}"
+                break
+        if stop_point is not None:
+            inserts = [c for c in inserts if c.s < stop_point.s]
+            inserts.append(stop_point)
+            points.extend(sorted(inserts, key=lambda c: c.s))
+            critical.extend(c for c in inserts if c.kind in ("LP", "BP"))
+            status = stop_name
+            break
+        points.extend(sorted(inserts, key=lambda c: c.s))
+        critical.extend(c for c in inserts if c.kind in ("LP", "BP"))
+        points.append(p)
+        if progress is not None:
+            progress(p, {})
+        if options.stop_at_first_limit and any(c.kind == "LP" for c in inserts):
+            status = "stopped at the first limit point"
+            break
+        # adapt the step from the corrector's effort
+        factor = (options.target_iterations / max(p.iterations, 1)) ** 0.5
+        ds = min(options.ds_max, max(options.ds_min, ds * min(2.0, max(0.5, factor))))
+    return _assemble(scene, control, pb, points, critical, rejections, status, tracer)
+
+
+def _start(scene, pb, control, start):
+    if start is not None:
+        q, loads = start
+        loads = scene.resolve_loads(loads)
+        if control == "volume":
+            return pb.x_of(np.asarray(q, float), loads["pressure"]), scene.volume(np.asarray(q, float))
+        return pb.x_of(np.asarray(q, float)), pb.lam_of(loads)
+    loads = scene.resolve_loads(None)
+    if control == "volume":
+        eq = equilibrium(scene, loads)
+        if not eq.converged:
+            raise SolverError(f"no start equilibrium: {eq.report.reason}")
+        return pb.x_of(eq.q, loads["pressure"]), scene.volume(eq.q)
+    if scene.start_guess is not None and all(v == 0 for v in loads.values()):
+        # a flat plate is singular at rest: start on the branch at a small load
+        lam = 1e-3 * pb.lam_scale * (1 if control != "E_hat" else 0.1)
+        loads = pb.loads(lam)
+    eq = equilibrium(scene, loads)
+    if not eq.converged:
+        raise SolverError(f"no start equilibrium at {loads}: {eq.report.reason}")
+    return pb.x_of(eq.q), pb.lam_of(loads)
+
+
+def _output(pb, p: Point, name: str) -> float:
+    if name in ("lam", pb.control):
+        return p.lam
+    m = pb.measures(p.x, p.lam)
+    if name not in m:
+        raise SnapmemError(f"until {name!r}: unknown output; allowed: {', '.join(k for k in m if k != 'taut')}")
+    return float(m[name])
+
+
+def _locate_value(tracer, base: Point, p: Point, f, kind: str):
+    """The point between base and p where f(point) = 0, by Brent's method on the arclength."""
+    cache = {}
+
+    def g(s):
+        if s not in cache:
+            cache[s] = tracer.point_at(base, s)[0]
+        return f(cache[s])
+
+    try:
+        s = brentq(g, 0.0, p.s - base.s, xtol=1e-14 * (p.s - base.s), rtol=4 * np.finfo(float).eps, maxiter=60)
+    except (SolverError, ValueError) as exc:
+        log.warning("could not locate %s point: %s", kind, exc)
+        return None
+    pt = tracer.point_at(base, s)[0]
+    pt.kind, pt.located = kind, True
+    return pt
+
+
+def _locate_critical(tracer, base: Point, p: Point):
+    """Locate the zero of the eigenvalue whose sign change altered the inertia between base and p."""
+    k = min(base.negative, p.negative)                 # index of the crossing eigenvalue
+
+    def eig_k(pt):
+        if k < pt.eigs.size:
+            return float(pt.eigs[k])
+        return float(pt.lam) * 0 + float(tracer.pb.stability(
+            tracer.pb.evaluate(pt.x, pt.lam)[1], pt.x, pt.lam, k + 1)[0][k])
+
+    located = _locate_value(tracer, base, p, eig_k, "critical") if tracer.opt.locate else None
+    if located is None:       # bracketed only: report the nearer end
+        located = Point(p.x, p.lam, p.tangent, p.eigs, p.negative, p.s, p.ds, 0)
+    located.kind = _classify(tracer, located, base, p)
+    located.negative = max(base.negative, p.negative)
+    return located
+
+
+def _classify(tracer, c: Point, base: Point, p: Point) -> str:
+    """LP if the null vector couples to dR/dlambda (or the parameter turns back), else BP."""
+    pb = tracer.pb
+    _, J = pb.evaluate(c.x, c.lam)
+    K = J.A if isinstance(J, BorderedMatrix) else J
+    lu = K.lu()
+    Fl = pb.dF_dlam(c.x, c.lam)[: K.n]
+    phi = np.random.default_rng(0).normal(size=K.n)
+    if not lu.singular:
+        for _ in range(3):                       # inverse iteration: K is (nearly) singular here
+            phi = lu.solve(phi)
+            phi /= np.linalg.norm(phi)
+    c.coupling = abs(float(phi @ Fl)) / (np.linalg.norm(Fl) + 1e-300)
+    turned = base.tangent[-1] * p.tangent[-1] < 0
+    if isinstance(J, BorderedMatrix):            # volume control: classify by the turning
+        return "LP" if turned else "BP"
+    return "LP" if (c.coupling > 1e-6 or turned) else "BP"
+
+
+def _touching(tracer, a: Point, b: Point, c: Point):
+    """Catch an eigenvalue that dips to zero and back between a and c without changing the count."""
+    fa, fb, fc = a.test_value, b.test_value, c.test_value
+    if not (b.negative == a.negative == c.negative and fb < fa and fb < fc):
+        return []
+    if b.negative > 0:                     # watch the lowest non-negative eigenvalue
+        return []
+    sa, sb, sc = a.s, b.s, c.s
+    # parabola through the three points; its minimum
+    A = np.array([[sa * sa, sa, 1], [sb * sb, sb, 1], [sc * sc, sc, 1]])
+    try:
+        qa, qb, qc = np.linalg.solve(A, [fa, fb, fc])
+    except np.linalg.LinAlgError:
+        return []
+    if qa <= 0:
+        return []
+    s_min = -qb / (2 * qa)
+    f_min = qc - qb * qb / (4 * qa)
+    if f_min > 0 or not (sa < s_min < sc):
+        return []
+    log.info("an eigenvalue may touch zero near s = %.6g: checking", s_min)
+    try:
+        mid = tracer.point_at(b, s_min - sb)[0] if s_min > sb else tracer.point_at(a, s_min - sa)[0]
+    except SolverError:
+        return []
+    if mid.negative == b.negative:
+        return []
+    base = b if s_min > sb else a
+    first = _locate_critical(tracer, base, mid)
+    second = _locate_critical(tracer, mid, c) if s_min > sb else _locate_critical(tracer, mid, b)
+    return [first, second]
+
+
+def _assemble(scene, control, pb, points, critical, rejections, status, tracer) -> Branch:
+    rows = []
+    for p in points:
+        m = pb.measures(p.x, p.lam)
+        row = {"s": p.s, "control": p.lam, **m,
+               "min_eig": p.test_value if p.eigs is None else float(p.eigs[0]),
+               "negative_eigs": -1 if p.negative is None else int(p.negative),
+               "stable": bool(p.negative == 0) if p.negative is not None else None,
+               "point": p.kind if p.kind in ("LP", "BP") else "",
+               "save_at": p.kind == "SAVE", "ds": p.ds, "iterations": p.iterations}
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    crit_rows = []
+    for c in critical:
+        m = pb.measures(c.x, c.lam)
+        crit_rows.append({"kind": c.kind, "s": c.s, "control": c.lam, **m,
+                          "min_eig": c.test_value, "located": c.located, "coupling": c.coupling})
+    points_table = pd.DataFrame(crit_rows, columns=None if crit_rows else
+                                ["kind", "s", "control", "pressure", "voltage", "E_hat", "volume", "u_max",
+                                 "stretch_max", "min_tension", "taut", "min_eig", "located", "coupling"])
+    stats = {"steps": int(sum(1 for p in points if p.kind == "")) - 1, "rejected": len(rejections),
+             "newton_iterations": tracer.newton_iterations, "evaluations": tracer.evaluations}
+    return Branch(scene, control, table, points_table,
+                  pd.DataFrame(rejections, columns=["step", "s", "ds", "reason"]), status, points, stats)
+
+
+# ----------------------------------------------------------------------------------------------
+# two-parameter continuation of a limit point
+@dataclass(frozen=True)
+class FoldOptions:
+    """Options of :func:`fold_curve`.
+
+    Attributes
+    ----------
+    tol : float
+        Newton tolerance on max |R| relative to the force scale, default 1e-10.
+    max_iterations : int
+        Newton iterations per value, default 15.
+    max_refinements : int
+        Times a failed increment of the second parameter is halved, default 6.
+    trace_until : mapping
+        Where the first trace (and a fallback trace) gives up looking for a limit point,
+        default stretch_max = 12.
+    """
+
+    tol: float = 1e-10
+    max_iterations: int = 15
+    max_refinements: int = 6
+    trace_until: tuple = (("stretch_max", 12.0),)
+
+
+def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "pressure",
+               options: FoldOptions = FoldOptions(), trace_options: ContinuationOptions = ContinuationOptions(),
+               progress: Callable[[int, int], None] | None = None) -> pd.DataFrame:
+    """The curve of limit points of ``control`` as a second parameter runs through ``values``.
+
+    The first limit point is found by tracing a branch; every next one by Newton on the
+    minimally extended system [R(x, lam) = 0, g(x, lam) = 0] from the previous one, where g is
+    the bordered test function ([[K, phi], [phi^T, 0]] [v; g] = [0; 1], zero exactly where K is
+    singular) and dg/dx = -D3Pi[v, v, .] comes from a central difference of K(x + e v) v. So a
+    limit-point map costs a few Newton steps per value, not a traced branch per value.
+
+    Parameters
+    ----------
+    scene_at : callable
+        value -> Scene (the same meridian node count for every value).
+    values : sequence of float
+        Values of the second parameter, in order.
+    control : str
+        The continuation parameter whose limit is followed ('pressure', 'voltage', 'E_hat').
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per value: ``value``, ``limit`` (the control at the limit point), ``exists``,
+        ``method`` ('fold' or 'trace'), ``iterations``, ``status``, and the branch measures at the
+        limit point (pressure, voltage, E_hat, volume, u_max, stretch_max, min_tension, ...).
+    """
+    if control == "volume":
+        raise SnapmemError("control = 'volume': volume control has no limit points to follow")
+    values = [check_real("value", v) for v in values]
+    if not values:
+        raise SnapmemError("values: need at least one value of the second parameter")
+    rows, previous = [], []            # previous: [(value, x, lam, phi)]
+    for i, value in enumerate(values):
+        row = None
+        if previous:
+            row = _continue_fold(scene_at, previous, value, control, options)
+        if row is None:
+            row = _fold_by_trace(scene_at(value), control, options, trace_options)
+        row["value"] = value
+        rows.append(row)
+        if row.pop("_fold", None) is not None and row["exists"]:
+            previous.append((value, row.pop("_x"), row["limit"], row.pop("_phi")))
+        else:
+            row.pop("_x", None), row.pop("_phi", None)
+        if progress is not None:
+            progress(i + 1, len(values))
+    table = pd.DataFrame(rows)
+    return table[["value", "limit", "exists", "method", "iterations", "status"]
+                 + [c for c in table.columns if c not in ("value", "limit", "exists", "method", "iterations", "status")]]
+
+
+def _fold_by_trace(scene, control, options, trace_options):
+    opts = ContinuationOptions(**{**asdict(trace_options), "stop_at_first_limit": True, "save_at": ()})
+    try:
+        br = trace(scene, control, until=dict(options.trace_until), options=opts)
+    except (SolverError, SnapmemError) as exc:
+        return {"limit": float("nan"), "exists": False, "method": "trace", "iterations": 0,
+                "status": f"trace failed: {exc}"}
+    lps = br.limit_points()
+    iterations = br.stats["newton_iterations"]
+    if lps.empty:
+        return {"limit": float("nan"), "exists": False, "method": "trace", "iterations": iterations,
+                "status": f"no limit point ({br.status})"}
+    pb = make_problem(scene, control)
+    lp = next(p for p in br.states if p.kind == "LP")
+    _, K = pb.evaluate(lp.x, lp.lam)
+    phi = _null_vector(K)
+    return {"limit": lp.lam, "exists": True, "method": "trace", "iterations": iterations,
+            "status": "located", **pb.measures(lp.x, lp.lam), "_fold": True, "_x": lp.x, "_phi": phi}
+
+
+def _null_vector(K):
+    lu = K.lu()
+    phi = np.random.default_rng(1).normal(size=K.n)
+    if not lu.singular:
+        for _ in range(3):
+            phi = lu.solve(phi)
+            phi /= np.linalg.norm(phi)
+    return phi / np.linalg.norm(phi)
+
+
+def _continue_fold(scene_at, previous, value, control, options, depth=0):
+    v0, x0, lam0, phi = previous[-1]
+    scene = scene_at(value)
+    pb = make_problem(scene, control)
+    ref_new = scene.reference_state()[scene.free]
+    ref_old = _reference_free(scene_at, v0, scene)
+    x, lam = x0 - ref_old + ref_new, lam0
+    if len(previous) >= 2:                        # secant predictor along the fold curve
+        v1, x1, lam1, _ = previous[-2]
+        f = (value - v0) / (v0 - v1)
+        x, lam = x + f * (x0 - x1), lam + f * (lam0 - lam1)
+    result = _fold_newton(pb, scene, x, lam, phi, options)
+    if result is None:
+        if depth >= options.max_refinements:
+            return None
+        mid = 0.5 * (v0 + value)
+        row = _continue_fold(scene_at, previous, mid, control, options, depth + 1)
+        if row is None or not row.get("exists"):
+            return None
+        extended = previous + [(mid, row["_x"], row["limit"], row["_phi"])]
+        return _continue_fold(scene_at, extended, value, control, options, depth + 1)
+    x, lam, phi_new, iterations = result
+    return {"limit": lam, "exists": True, "method": "fold", "iterations": iterations, "status": "located",
+            **pb.measures(x, lam), "_fold": True, "_x": x, "_phi": phi_new}
+
+
+_REFERENCE_CACHE: dict = {}
+
+
+def _reference_free(scene_at, value, like: Scene):
+    key = (id(scene_at), value)
+    if key not in _REFERENCE_CACHE:
+        s = scene_at(value)
+        _REFERENCE_CACHE.clear()
+        _REFERENCE_CACHE[key] = s.reference_state()[s.free]
+    return _REFERENCE_CACHE[key]
+
+
+def _fold_newton(pb, scene, x, lam, phi, options):
+    """Newton on [R; g] for the limit point near (x, lam); returns (x, lam, phi, iterations) or None."""
+    tol = options.tol * scene.force_scale
+    L = scene.meridian.size
+    for it in range(options.max_iterations):
+        if pb.inadmissible(x, lam) is not None:
+            return None
+        F, K = pb.evaluate(x, lam)
+        border = BorderedMatrix(K, phi, phi, [[0.0]])
+        lu = border.lu()
+        if lu.singular:
+            return None
+        rhs = np.zeros(K.n + 1)
+        rhs[-1] = 1.0
+        sol = lu.solve(rhs)
+        v, g = sol[:-1], sol[-1]
+        eps = 1e-6 * L / max(np.max(np.abs(v)), 1e-300)
+        Kv_plus = pb.evaluate(x + eps * v, lam)[1].matvec(v)
+        Kv_minus = pb.evaluate(x - eps * v, lam)[1].matvec(v)
+        g_x = -(Kv_plus - Kv_minus) / (2 * eps)                       # -D3Pi[v, v, .]
+        dl = 1e-6 * max(abs(lam), pb.lam_scale)
+        g_l = -(pb.evaluate(x, lam + dl)[1].matvec(v) - pb.evaluate(x, lam - dl)[1].matvec(v)) @ v / (2 * dl)
+        Fl = pb.dF_dlam(x, lam)
+        if not np.all(np.isfinite(F)):
+            return None
+        converged = np.max(np.abs(F)) <= tol
+        J = BorderedMatrix(K, Fl, g_x, [[g_l]])
+        lu = J.lu()
+        if lu.singular:
+            return None
+        d = lu.solve(-np.append(F, g))
+        if converged and abs(d[-1]) <= 1e-12 * max(abs(lam), pb.lam_scale):
+            return x, lam, v / np.linalg.norm(v), it
+        x, lam = x + d[:-1], lam + d[-1]
+        if abs(d[-1]) > 0.5 * max(abs(lam), pb.lam_scale) or np.max(np.abs(d[:-1])) > 0.5 * L:
+            return None                               # wandering off: refine the increment instead
+    return None
