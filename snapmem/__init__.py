@@ -18,6 +18,7 @@ from .newton import Equilibrium, NewtonOptions, NewtonReport, equilibrium, solve
 from .scene import Scene
 from .scenes import SCENES, Parameter, SceneSpec, build_scene, register
 from .terms import Electric, PressureWork, Stretching
+from . import contact  # noqa: F401  (registers the contact terms with TERMS)
 
 __all__ = [
     "SnapmemError", "SolverError",

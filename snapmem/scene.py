@@ -18,11 +18,12 @@ from typing import Callable, Iterable, Mapping
 import numpy as np
 
 from .banded import BandedMatrix
+from .bordered import BorderedMatrix
 from .errors import SnapmemError, check_real
 from .kinematics import EdgeKinematics
 from .materials import Density
 from .meridian import Meridian
-from .terms import DensityTerm, EdgeTerm, Electric, PressureWork, Stretching, Term
+from .terms import DensityTerm, EdgeTerm, Electric, NodeTerm, PressureWork, Stretching, Term
 
 
 @dataclass
@@ -37,8 +38,9 @@ class Evaluation:
         dPi/dq over all degrees of freedom [N]; at fixed ones it is the reaction force (negated).
     residual : ndarray (n_free,) or None
         The gradient on the free degrees of freedom, in band order.
-    stiffness : BandedMatrix or None
-        K = d2Pi/dq2 on the free degrees of freedom, in band order [N/m].
+    stiffness : BandedMatrix, BorderedMatrix or None
+        K = d2Pi/dq2 on the free degrees of freedom, in band order [N/m] (bordered by one dense
+        row and column per rigid body when the scene has bodies).
     """
 
     energy: float
@@ -84,10 +86,17 @@ class Scene:
         self.terms = tuple(terms)
         self.density_terms = [t for t in self.terms if isinstance(t, DensityTerm)]
         self.edge_terms = [t for t in self.terms if isinstance(t, EdgeTerm)]
-        unknown = [t for t in self.terms if not isinstance(t, (DensityTerm, EdgeTerm))]
+        self.node_terms = [t for t in self.terms if isinstance(t, NodeTerm)]
+        unknown = [t for t in self.terms if not isinstance(t, (DensityTerm, EdgeTerm, NodeTerm))]
         if unknown:
-            raise SnapmemError(f"terms: {unknown!r} are neither density nor edge terms")
-        n_dof = 2 * meridian.nodes
+            raise SnapmemError(f"terms: {unknown!r} are neither density, edge nor node terms")
+        # rigid bodies of the node terms: one degree of freedom each, after the 2N node coordinates
+        self.bodies = tuple(b for t in self.node_terms for b in t.bodies)
+        self.n_node_dofs = 2 * meridian.nodes
+        offsets = np.cumsum([0] + [len(t.bodies) for t in self.node_terms])
+        self._body_slices = [slice(self.n_node_dofs + a, self.n_node_dofs + b)
+                             for a, b in zip(offsets[:-1], offsets[1:])]
+        n_dof = self.n_node_dofs + len(self.bodies)
         self.fixed = tuple(sorted({int(d) for d in fixed}))
         if any(d < 0 or d >= n_dof for d in self.fixed):
             raise SnapmemError(f"fixed = {list(self.fixed)}: degrees of freedom must lie in 0..{n_dof - 1}")
@@ -118,8 +127,11 @@ class Scene:
         is_fixed = np.zeros(2 * n_nodes, dtype=bool)
         is_fixed[list(self.fixed)] = True
         self.free = dof_order[~is_fixed[dof_order]]          # band position -> dof
+        self.n_band = self.free.size
+        self.free = np.concatenate([self.free, 2 * n_nodes + np.arange(len(self.bodies))])  # bodies last
         position = np.full(2 * n_nodes, -1)
-        position[self.free] = np.arange(self.free.size)
+        position[self.free[:self.n_band]] = np.arange(self.n_band)
+        self._position = position
         edges = m.edges
         self.edge_dofs = np.concatenate([2 * edges[:, :1] + np.arange(2), 2 * edges[:, 1:] + np.arange(2)], axis=1)
         lpos = position[self.edge_dofs]                          # (E, 4)
@@ -130,15 +142,35 @@ class Scene:
         flat = j * rows + (2 * b + i - j)                        # position in ab.T (C order)
         self._hess_mask = valid.ravel()
         self._hess_index = np.broadcast_to(flat, valid.shape).ravel()[self._hess_mask]
-        self._band_size = rows * self.free.size
+        self._band_size = rows * self.n_band
+        # node terms: each node's 2x2 block (r_i, z_i) into the same band
+        npos = position[2 * np.arange(n_nodes)[:, None] + np.arange(2)]          # (N, 2)
+        i, j = npos[:, :, None], npos[:, None, :]
+        valid = (i >= 0) & (j >= 0)
+        self._node_hess_mask = valid.ravel()
+        self._node_hess_index = np.broadcast_to(j * rows + (2 * b + i - j), valid.shape).ravel()[self._node_hess_mask]
+        self._node_pos = npos
+        lv = m.node_lengths()
+        area = 2.0 * np.pi * m.r * lv
+        pole = m.r == 0
+        area[pole] = np.pi * lv[pole] ** 2                     # a pole node's cap
+        self.node_area = area
 
     @property
     def n_free(self) -> int:
         return self.free.size
 
     def reference_state(self) -> np.ndarray:
-        """q of the reference shape, shape (2N,)."""
-        return self.meridian.q
+        """q of the reference shape (and the bodies at their start heights), shape (2N + bodies,)."""
+        return np.concatenate([self.meridian.q, [b.z0 for b in self.bodies]])
+
+    def node_coordinates(self, q: np.ndarray) -> np.ndarray:
+        """Node positions (r_i, z_i) of a state, shape (N, 2) (a view of q)."""
+        return q[: self.n_node_dofs].reshape(-1, 2)
+
+    def body_coordinates(self, q: np.ndarray) -> list:
+        """The heights of each node term's bodies, one array (k_t,) per node term."""
+        return [q[s] for s in self._body_slices]
 
     def resolve_loads(self, loads: Mapping[str, float] | None) -> dict:
         """The scene's default loads updated by ``loads``; unknown names are an error."""
@@ -146,13 +178,13 @@ class Scene:
         for key, value in (loads or {}).items():
             if key not in out:
                 raise SnapmemError(f"load {key!r}: this scene has no such load; it has {sorted(out) or 'none'}")
-            out[key] = float(value)
+            out[key] = check_real(key, value)
         return out
 
     # ----------------------------------------------------------------------------------------
     # assembly
     def kinematics(self, q: np.ndarray) -> EdgeKinematics:
-        return EdgeKinematics.of(self.meridian, q)
+        return EdgeKinematics.of(self.meridian, q[: self.n_node_dofs])
 
     def density(self, kin: EdgeKinematics, loads) -> Density | None:
         """Sum of the density terms' densities, or None if the scene has none."""
@@ -189,15 +221,47 @@ class Scene:
                 grad_local = g if grad_local is None else grad_local + g
             if order >= 2:
                 hess_local = h if hess_local is None else hess_local + h
+        nodes = [(t, t.node_local(self.node_coordinates(q), q[s], self.node_area, loads, order))
+                 for t, s in zip(self.node_terms, self._body_slices)]
+        energy += sum(local.energy for _, local in nodes)
         if order < 1:
             return Evaluation(energy, None, None, None)
         gradient = np.bincount(self.edge_dofs.ravel(), grad_local.ravel(), minlength=q.size)
+        for (term, local), s in zip(nodes, self._body_slices):
+            gradient[: self.n_node_dofs] += local.gradient[:, :2].ravel()
+            gradient[s] += local.gradient[:, 2:].sum(axis=0)
+            if local.body_gradient is not None:
+                gradient[s] += local.body_gradient
         stiffness = None
         if order >= 2:
-            values = hess_local.reshape(-1)[self._hess_mask]
-            band = np.bincount(self._hess_index, values, minlength=self._band_size)
-            stiffness = BandedMatrix(band.reshape(self.n_free, 3 * self.bandwidth + 1).T, self.bandwidth)
+            index, values = self._hess_index, hess_local.reshape(-1)[self._hess_mask]
+            if nodes:
+                node_hess = sum(local.hessian[:, :2, :2] for _, local in nodes)
+                index = np.concatenate([index, self._node_hess_index])
+                values = np.concatenate([values, node_hess.reshape(-1)[self._node_hess_mask]])
+            band = np.bincount(index, values, minlength=self._band_size)
+            stiffness = BandedMatrix(band.reshape(self.n_band, 3 * self.bandwidth + 1).T, self.bandwidth)
+            if self.bodies:
+                stiffness = self._bordered(stiffness, nodes)
         return Evaluation(energy, gradient, gradient[self.free], stiffness)
+
+    def _bordered(self, band: BandedMatrix, nodes) -> BorderedMatrix:
+        """The band bordered by the rigid bodies' rows and columns (node-body and body-body blocks)."""
+        k = len(self.bodies)
+        border = np.zeros((self.n_band, k))
+        corner = np.zeros((k, k))
+        pos = self._node_pos.ravel()
+        keep = pos >= 0
+        for (term, local), s in zip(nodes, self._body_slices):
+            cols = np.arange(s.start, s.stop) - self.n_node_dofs
+            h = local.hessian
+            for a, col in enumerate(cols):
+                coupling = h[:, :2, 2 + a].ravel()
+                border[:, col] += np.bincount(pos[keep], coupling[keep], minlength=self.n_band)
+            corner[np.ix_(cols, cols)] += h[:, 2:, 2:].sum(axis=0)
+            if local.body_hessian is not None:
+                corner[np.ix_(cols, cols)] += local.body_hessian
+        return BorderedMatrix(band, border, corner)
 
     def energy(self, q, loads=None) -> float:
         return self.evaluate(q, loads, order=0).energy
@@ -219,7 +283,7 @@ class Scene:
         for term in self.edge_terms:
             if name in term.loads:
                 local += term.load_gradient(kin, loads, name)
-        return np.bincount(self.edge_dofs.ravel(), local.ravel(), minlength=q.size)[self.free]
+        return np.bincount(self.edge_dofs.ravel(), local.ravel(), minlength=q.size)[self.free]   # node terms carry no load
 
     # ----------------------------------------------------------------------------------------
     # the domain every state must stay in
@@ -227,7 +291,7 @@ class Scene:
         """Why q is outside the model's domain (negative radius, zero length, material lock), or None."""
         if not np.all(np.isfinite(q)):
             return "state has NaN or inf"
-        r = q[0::2]
+        r = q[: self.n_node_dofs: 2]
         free_r = np.ones(r.size, dtype=bool)
         free_r[[d // 2 for d in self.fixed if d % 2 == 0]] = False
         if np.any(r[free_r] <= 0):
@@ -239,15 +303,25 @@ class Scene:
             ok = term.admissible(kin)
             if not np.all(ok):
                 return f"edge {int(np.flatnonzero(~ok)[0])} is outside the domain of {term!r}"
+        x = self.node_coordinates(q)
+        for term, s in zip(self.node_terms, self._body_slices):
+            why = term.admissible(x, q[s])
+            if why is not None:
+                return why
         return None
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
-        """Largest step fraction alpha <= 1 keeping free radii positive (fraction to boundary 0.9)."""
-        r, dr = q[0::2], dq[0::2]
+        """Largest step fraction alpha <= 1 keeping free radii positive (fraction to boundary 0.9)
+        and every term's state admissible (no node crossing a contact gap of zero)."""
+        r, dr = q[: self.n_node_dofs: 2], dq[: self.n_node_dofs: 2]
         shrinking = (dr < 0) & (r > 0)
-        if not np.any(shrinking):
-            return 1.0
-        return float(min(1.0, 0.9 * np.min(r[shrinking] / -dr[shrinking])))
+        alpha = 1.0
+        if np.any(shrinking):
+            alpha = float(min(1.0, 0.9 * np.min(r[shrinking] / -dr[shrinking])))
+        x, dx = self.node_coordinates(q), self.node_coordinates(dq)
+        for term, s in zip(self.node_terms, self._body_slices):
+            alpha = min(alpha, term.max_step(x, q[s], dx, dq[s]))
+        return alpha
 
     # ----------------------------------------------------------------------------------------
     # outputs
@@ -277,7 +351,7 @@ class Scene:
 
     def displacement(self, q: np.ndarray) -> np.ndarray:
         """Node displacement magnitudes |x - x_bar|, shape (N,) [m]."""
-        d = q - self.meridian.q
+        d = q[: self.n_node_dofs] - self.meridian.q
         return np.hypot(d[0::2], d[1::2])
 
     def stretches(self, q: np.ndarray):

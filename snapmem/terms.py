@@ -147,6 +147,73 @@ class PressureWork(EdgeTerm):
         return -self.volume_local(kin, 1)[1]
 
 
+@dataclass(frozen=True)
+class RigidBody:
+    """A rigid body that moves along the axis: one degree of freedom, its height z.
+
+    A term that couples nodes to a body lists it in its ``bodies``; the scene appends one
+    degree of freedom per body after the 2N node coordinates.
+
+    Attributes
+    ----------
+    name : str
+        Name used in outputs (e.g. ``ball``).
+    z0 : float
+        Height of the body in the reference state [m].
+    mass : float
+        Mass [kg] (its inertia in dynamics).
+    """
+
+    name: str
+    z0: float
+    mass: float
+
+
+@dataclass
+class NodeLocal:
+    """What a node term gives the assembly, for N nodes and k = len(term.bodies).
+
+    Attributes
+    ----------
+    energy : float
+        [J]
+    gradient : ndarray (N, 2 + k) or None
+        d(energy)/d(r_i, z_i, y_1..y_k) of each node's share [N].
+    hessian : ndarray (N, 2 + k, 2 + k) or None
+        Second derivatives of each node's share [N/m].
+    body_gradient, body_hessian : ndarray (k,), (k, k) or None
+        Parts that depend on the body coordinates y alone (a body's weight).
+    """
+
+    energy: float
+    gradient: np.ndarray | None = None
+    hessian: np.ndarray | None = None
+    body_gradient: np.ndarray | None = None
+    body_hessian: np.ndarray | None = None
+
+
+class NodeTerm(Term):
+    """A term summed over nodes (a contact barrier): node i's local coordinates are
+    (r_i, z_i) followed by the heights y of the term's ``bodies``.
+
+    ``area`` passed in is each node's reference ring area 2 pi r_bar_i l_bar_i (a pole node:
+    its cap), shape (N,) [m^2].
+    """
+
+    bodies: tuple = ()
+
+    def node_local(self, x: np.ndarray, y: np.ndarray, area: np.ndarray, loads, order: int) -> NodeLocal:
+        raise NotImplementedError
+
+    def admissible(self, x: np.ndarray, y: np.ndarray) -> str | None:
+        """Why (x (N, 2), y (k,)) is outside this term's domain (a gap <= 0), or None."""
+        return None
+
+    def max_step(self, x, y, dx, dy) -> float:
+        """Largest fraction alpha <= 1 of the step (dx, dy) that keeps the state admissible."""
+        return 1.0
+
+
 #: Every energy term with a factory of one example instance for a membrane of thickness H,
 #: so that a single test checks the derivatives of every registered term.
 TERMS = {

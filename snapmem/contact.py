@@ -1,0 +1,293 @@
+"""Contact with rigid bodies: the IPC log barrier on the gap between each node and a body.
+
+For a gap d > 0 between node i and a body, with barrier width d_hat [m],
+
+    b(d) = -(d - d_hat)^2 ln(d / d_hat)   for d < d_hat,   0 for d >= d_hat,
+
+and the node's energy is kappa A_i b(d_i) / d_hat with A_i its reference ring area
+2 pi r_bar_i l_bar_i (a pole node: its cap). b / d_hat is a length, so kappa is a contact
+pressure [Pa]: the barrier pushes with kappa |b'(d)| per unit area, 1.19 kappa at d = d_hat / 2,
+growing without bound as d -> 0. The energy is C2 at d = d_hat (b = b' = 0 there) and infinite
+at d = 0, and ``max_step`` keeps every Newton step short of d = 0 (fraction to the boundary 0.9),
+so no accepted state ever penetrates a body.
+
+Bodies: a rod inside a torus (d = r - Rw), a cylindrical shell around it (d = Rw - r), a plane
+(d = +-(z - z0)) and a ball on the axis (d = |x - (0, zb)| - rb) whose height zb is either fixed
+or a degree of freedom of its own (a :class:`~snapmem.terms.RigidBody` with mass and weight).
+The chain rule from gap to node coordinates is written once, in :class:`Contact`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import check_real
+from .terms import NodeLocal, NodeTerm, RigidBody
+
+FRACTION_TO_BOUNDARY = 0.9
+
+
+def barrier(d: np.ndarray, dhat: float, order: int = 2):
+    """IPC barrier b(d) and its first two derivatives in d (zero where d >= dhat; +inf for d <= 0).
+
+    Returns (b, b', b'') with entries None above ``order``; each of the shape of ``d`` [m^2, m, 1].
+    """
+    d = np.asarray(d, dtype=float)
+    active = d < dhat
+    dd = np.where(active, d, dhat)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log = np.log(dd / dhat)
+        e = dd - dhat
+        b = np.where(d > 0, -e * e * log, np.inf)
+        b1 = (-2.0 * e * log - e * e / dd) if order >= 1 else None
+        b2 = (-2.0 * log + (dhat - dd) * (3.0 * dd + dhat) / (dd * dd)) if order >= 2 else None
+    return b, b1, b2
+
+
+@dataclass(frozen=True, kw_only=True)
+class Contact(NodeTerm):
+    """Base of the contact barriers: a gap per node and the barrier chain rule.
+
+    Attributes
+    ----------
+    kappa : float
+        Contact pressure scale [Pa] (> 0).
+    dhat : float
+        Barrier width [m] (> 0): nodes farther than this feel nothing.
+    nodes : tuple of int, optional
+        The nodes that can touch this body (default all); leave out a node held fixed on it.
+    """
+
+    kappa: float
+    dhat: float
+    nodes: tuple | None = None
+
+    def __post_init__(self):
+        check_real("kappa", self.kappa, minimum=0.0, min_inclusive=False)
+        check_real("dhat", self.dhat, minimum=0.0, min_inclusive=False)
+
+    # a subclass gives the gap of nodes x (M, 2) from the body at heights y (k,):
+    # d (M,), its gradient (M, 2 + k) and Hessian (M, 2 + k, 2 + k) (None for a linear gap)
+    def gap(self, x: np.ndarray, y: np.ndarray, order: int):
+        raise NotImplementedError
+
+    def _selected(self, x):
+        return x if self.nodes is None else x[list(self.nodes)]
+
+    def gaps(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Gap of every node of the term (in ``nodes`` order), shape (M,) [m]."""
+        return self.gap(self._selected(x), y, 0)[0]
+
+    def node_local(self, x, y, area, loads, order):
+        k = len(self.bodies)
+        idx = np.arange(x.shape[0]) if self.nodes is None else np.asarray(self.nodes)
+        d, dg, dh = self.gap(x[idx], y, order)
+        c = self.kappa * area[idx] / self.dhat
+        b, b1, b2 = barrier(d, self.dhat, order)
+        out = NodeLocal(float(c @ b))
+        out.body_gradient, out.body_hessian = self.body_energy_derivatives(y, order)
+        out.energy += self.body_energy(y)
+        if order < 1:
+            return out
+        n = x.shape[0]
+        g = np.zeros((n, 2 + k))
+        g[idx] = (c * b1)[:, None] * dg
+        out.gradient = g
+        if order >= 2:
+            h = np.zeros((n, 2 + k, 2 + k))
+            local = (c * b2)[:, None, None] * dg[:, :, None] * dg[:, None, :]
+            if dh is not None:
+                local += (c * b1)[:, None, None] * dh
+            h[idx] = local
+            out.hessian = h
+        return out
+
+    def body_energy(self, y) -> float:
+        """Energy of the body alone (its weight) [J]."""
+        return 0.0
+
+    def body_energy_derivatives(self, y, order):
+        return None, None
+
+    def admissible(self, x, y):
+        d = self.gaps(x, y)
+        if np.any(d <= 0):
+            i = int(np.argmin(d))
+            node = i if self.nodes is None else self.nodes[i]
+            return f"node {node} touches or penetrates {type(self).__name__} (gap {d[i]:.3g} m)"
+        return None
+
+    def max_step(self, x, y, dx, dy):
+        """Largest alpha <= 1 keeping every gap above (1 - 0.9) of the way to zero (linear gaps)."""
+        xs, dxs = self._selected(x), self._selected(dx)
+        d = self.gap(xs, y, 0)[0]
+        dd = self.gap_rate(xs, y, dxs, dy)
+        closing = dd < 0
+        if not np.any(closing):
+            return 1.0
+        return float(min(1.0, FRACTION_TO_BOUNDARY * np.min(d[closing] / -dd[closing])))
+
+    def gap_rate(self, x, y, dx, dy):
+        """d(gap)/d(alpha) along the step for a gap linear in the coordinates."""
+        _, g, _ = self.gap(x, y, 1)
+        return g[:, 0] * dx[:, 0] + g[:, 1] * dx[:, 1] + (g[:, 2:] @ dy if g.shape[1] > 2 else 0.0)
+
+    def forces(self, x: np.ndarray, y: np.ndarray, area: np.ndarray) -> np.ndarray:
+        """Normal force of the body on each node's ring, |kappa A_i b'(d_i) / d_hat|, shape (M,) [N]."""
+        idx = np.arange(x.shape[0]) if self.nodes is None else np.asarray(self.nodes)
+        d = self.gap(x[idx], y, 0)[0]
+        return np.abs(self.kappa * area[idx] / self.dhat * barrier(d, self.dhat, 1)[1])
+
+
+def _linear_gap(d, grad_row, order):
+    m = d.size
+    return d, (np.broadcast_to(grad_row, (m, len(grad_row))) if order >= 1 else None), None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Rod(Contact):
+    """A rigid rod of radius ``radius`` [m] on the axis, inside the membrane: d = r - radius."""
+
+    radius: float
+
+    def gap(self, x, y, order):
+        return _linear_gap(x[:, 0] - self.radius, np.array([1.0, 0.0]), order)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Shell(Contact):
+    """A rigid cylindrical shell of inner radius ``radius`` [m] around the membrane: d = radius - r."""
+
+    radius: float
+
+    def gap(self, x, y, order):
+        return _linear_gap(self.radius - x[:, 0], np.array([-1.0, 0.0]), order)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Plane(Contact):
+    """A rigid plane z = ``z0`` [m]; the membrane stays above it (``below=False``) or below it."""
+
+    z0: float
+    below: bool = False
+
+    def gap(self, x, y, order):
+        s = -1.0 if self.below else 1.0
+        return _linear_gap(s * (x[:, 1] - self.z0), np.array([0.0, s]), order)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Ball(Contact):
+    """A rigid ball of radius ``radius`` [m] centred on the axis: d = |x - (0, zb)| - radius.
+
+    With ``mass`` None the ball is held at height ``z0``; with a mass [kg] its height zb is a
+    degree of freedom of its own (a :class:`RigidBody` named ``name``, starting at ``z0``) with
+    weight -mass * gravity * zb (``gravity`` [m/s^2] is signed along z, e.g. -10).
+    """
+
+    radius: float
+    z0: float
+    mass: float | None = None
+    gravity: float = 0.0
+    name: str = "ball"
+
+    def __post_init__(self):
+        super().__post_init__()
+        check_real("radius", self.radius, minimum=0.0, min_inclusive=False)
+        if self.mass is not None:
+            check_real("mass", self.mass, minimum=0.0, min_inclusive=False)
+            object.__setattr__(self, "bodies", (RigidBody(self.name, self.z0, self.mass),))
+
+    def _centre(self, y):
+        return float(y[0]) if self.bodies else self.z0
+
+    def gap(self, x, y, order):
+        pr, pz = x[:, 0], x[:, 1] - self._centre(y)
+        s = np.hypot(pr, pz)
+        d = s - self.radius
+        if order < 1:
+            return d, None, None
+        nr, nz = pr / s, pz / s
+        cols = [nr, nz, -nz] if self.bodies else [nr, nz]
+        g = np.stack(cols, axis=1)
+        if order < 2:
+            return d, g, None
+        hrr, hrz, hzz = nz * nz / s, -nr * nz / s, nr * nr / s     # (I - n n^T) / s
+        if self.bodies:
+            h = np.stack([np.stack([hrr, hrz, -hrz], -1), np.stack([hrz, hzz, -hzz], -1),
+                          np.stack([-hrz, -hzz, hzz], -1)], -2)
+        else:
+            h = np.stack([np.stack([hrr, hrz], -1), np.stack([hrz, hzz], -1)], -2)
+        return d, g, h
+
+    def max_step(self, x, y, dx, dy):
+        """Largest alpha <= 1 before any node reaches the sphere (first root of |p + a dp| = rb), times 0.9."""
+        xs, dxs = self._selected(x), self._selected(dx)
+        dzb = float(dy[0]) if self.bodies else 0.0
+        pr, pz = xs[:, 0], xs[:, 1] - self._centre(y)
+        qr, qz = dxs[:, 0], dxs[:, 1] - dzb
+        a = qr * qr + qz * qz
+        b = pr * qr + pz * qz
+        c = pr * pr + pz * pz - self.radius ** 2
+        disc = b * b - a * c
+        hit = (a > 0) & (b < 0) & (disc >= 0)
+        if not np.any(hit):
+            return 1.0
+        root = (-b[hit] - np.sqrt(disc[hit])) / a[hit]          # first crossing (c > 0)
+        return float(min(1.0, FRACTION_TO_BOUNDARY * np.min(root)))
+
+    def body_energy(self, y):
+        return -self.mass * self.gravity * float(y[0]) if self.bodies else 0.0
+
+    def body_energy_derivatives(self, y, order):
+        if not self.bodies:
+            return None, None
+        return np.array([-self.mass * self.gravity]), np.zeros((1, 1))
+
+
+def contact_terms(scene) -> list:
+    """The contact terms of a scene, in order."""
+    return [t for t in scene.terms if isinstance(t, Contact)]
+
+
+def contact_report(scene, q: np.ndarray) -> dict:
+    """Total normal force [N] and smallest gap [m] of every contact term of the scene at q.
+
+    Keys are ``<name>_force`` and ``<name>_gap`` with name the body's class name in lower case
+    (``rod``, ``shell``, ``plane``, ``ball``), numbered if a scene has two of a kind.
+    """
+    x, ys = scene.node_coordinates(q), scene.body_coordinates(q)
+    out, seen = {}, {}
+    for term, y in zip(scene.node_terms, ys):
+        if not isinstance(term, Contact):
+            continue
+        name = type(term).__name__.lower()
+        seen[name] = seen.get(name, 0) + 1
+        if seen[name] > 1:
+            name = f"{name}{seen[name]}"
+        out[f"{name}_force"] = float(term.forces(x, y, scene.node_area).sum())
+        out[f"{name}_gap"] = float(term.gaps(x, y).min())
+    return out
+
+
+#: Contact examples for the derivative tests, by name: dhat -> term (active on every test shape,
+#: whose nodes lie within about 13 of the origin).
+CONTACT_EXAMPLES = {
+    "contact_rod": lambda dhat: Rod(kappa=3.0, dhat=dhat, radius=0.1, nodes=tuple(range(1, 9))),
+    "contact_shell": lambda dhat: Shell(kappa=3.0, dhat=dhat, radius=40.0),
+    "contact_plane": lambda dhat: Plane(kappa=3.0, dhat=dhat, z0=-20.0),
+    "contact_ball": lambda dhat: Ball(kappa=3.0, dhat=dhat, radius=0.5, z0=30.0),
+    "contact_ball_body": lambda dhat: Ball(kappa=3.0, dhat=dhat, radius=0.5, z0=30.0, mass=2.0, gravity=-10.0),
+}
+
+
+
+def _register():
+    from .terms import TERMS
+    for name in ("contact_rod", "contact_shell", "contact_plane", "contact_ball"):
+        TERMS[name] = (lambda example: lambda H: example(30.0))(CONTACT_EXAMPLES[name])
+
+
+_register()

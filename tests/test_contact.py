@@ -1,0 +1,146 @@
+"""Contact barriers: derivatives against finite differences over barrier widths 1e-5 to 1e-1,
+steps that never cross a gap of zero, contact forces, and the bordered matrix of a rigid body."""
+
+import numpy as np
+import pytest
+
+from snapmem.banded import BandedMatrix
+from snapmem.bordered import BorderedMatrix
+from snapmem.contact import CONTACT_EXAMPLES, Ball, Plane, Rod, Shell, barrier, contact_report
+from snapmem.meridian import sphere, torus
+from snapmem.scene import Scene
+from snapmem.terms import TERMS, PressureWork, Stretching
+from snapmem.materials import make_law
+
+
+def test_barrier_derivatives_and_smoothness():
+    dhat = 1e-3
+    d = np.linspace(1e-6, 2e-3, 997)
+    b, b1, b2 = barrier(d, dhat)
+    h = 1e-9
+    bp, b1p, _ = barrier(d + h, dhat)
+    bm, b1m, _ = barrier(d - h, dhat)
+    inside = np.abs(d - dhat) > 2 * h
+    np.testing.assert_allclose(b1[inside], ((bp - bm) / (2 * h))[inside], rtol=1e-5, atol=1e-12)
+    np.testing.assert_allclose(b2[inside], ((b1p - b1m) / (2 * h))[inside], rtol=1e-5, atol=1e-9)
+    assert np.all(b[d >= dhat] == 0) and np.all(b1[d >= dhat] == 0) and np.all(b2[d >= dhat] == 0)
+    assert np.all(b[d < dhat] > 0) and np.all(b1[d < dhat] < 0)
+    assert barrier(np.array([0.0, -1.0]), dhat, 0)[0].tolist() == [np.inf, np.inf]
+
+
+def test_contact_terms_are_registered():
+    for name in ("contact_rod", "contact_shell", "contact_plane", "contact_ball"):
+        assert name in TERMS
+
+
+def _placed(kind, x, dhat):
+    """A term of ``kind`` placed so that its nearest node sits at 0.3 dhat and a few more within dhat."""
+    r, z = x[:, 0], x[:, 1]
+    if kind == "contact_rod":
+        return Rod(kappa=2.0, dhat=dhat, radius=r.min() - 0.3 * dhat)
+    if kind == "contact_shell":
+        return Shell(kappa=2.0, dhat=dhat, radius=r.max() + 0.3 * dhat)
+    if kind == "contact_plane":
+        return Plane(kappa=2.0, dhat=dhat, z0=z.min() - 0.3 * dhat, nodes=tuple(range(1, len(x) + 1)))
+    top = int(np.argmax(z))
+    zb = z[top] + 0.5 + 0.3 * dhat
+    mass = 2.0 if kind == "contact_ball_body" else None
+    return Ball(kappa=2.0, dhat=dhat, radius=0.5, z0=zb, mass=mass, gravity=-10.0)
+
+
+@pytest.mark.parametrize("dhat", [1e-5, 1e-4, 1e-3, 1e-2, 1e-1])
+@pytest.mark.parametrize("kind", list(CONTACT_EXAMPLES))
+def test_contact_derivatives_over_barrier_widths(kind, dhat):
+    """Gradient and Hessian of each registered contact kind, with a node deep in the barrier."""
+    rng = np.random.default_rng(7)
+    m = torus(10.0, 2.0, 12) if kind in ("contact_rod", "contact_shell") else sphere(10.0, 11)
+    fixed = [1] if m.closed else [0, 1, 2 * (m.nodes - 1)]
+    q0 = m.q * 1.1 + rng.normal(scale=0.05, size=m.q.size)
+    q0[fixed] = m.q[fixed]
+    x = q0.reshape(-1, 2)
+    if kind == "contact_plane":          # the plane under a free node, not the fixed south pole
+        x = x[1:]
+    term = _placed(kind, x, dhat)
+    scene = Scene(m, 0.1, [PressureWork(), term], fixed=fixed)
+    q = np.concatenate([q0, [b.z0 for b in scene.bodies]])
+    ev = scene.evaluate(q)
+    assert ev.energy > 0 and np.isfinite(ev.energy)
+    h = 1e-3 * 0.3 * dhat
+    eye = np.eye(q.size)
+    g_fd = np.array([(scene.energy(q + h * e) - scene.energy(q - h * e)) / (2 * h) for e in eye])
+    g = ev.gradient
+    assert np.max(np.abs(g - g_fd)) <= 1e-5 * np.max(np.abs(g))
+    K_fd = np.array([(scene.gradient(q + h * e) - scene.gradient(q - h * e)) / (2 * h) for e in eye]).T
+    K_fd = K_fd[np.ix_(scene.free, scene.free)]
+    K = ev.stiffness.to_dense()
+    assert np.max(np.abs(K - K_fd)) <= 1e-5 * np.max(np.abs(K))
+    np.testing.assert_allclose(K, K.T, rtol=0, atol=1e-12 * np.max(np.abs(K)))
+    if kind == "contact_ball_body":
+        assert isinstance(ev.stiffness, BorderedMatrix) and ev.stiffness.n == scene.n_free
+        assert np.any(ev.stiffness.border != 0)
+
+
+@pytest.mark.parametrize("kind", list(CONTACT_EXAMPLES))
+def test_max_step_never_crosses_a_gap(kind):
+    """Random steps toward the body: the allowed fraction leaves every gap positive, and at most
+    1/0.9 of it would reach zero (the step is not cut more than the fraction to the boundary)."""
+    rng = np.random.default_rng(3)
+    m = torus(10.0, 2.0, 12) if kind in ("contact_rod", "contact_shell") else sphere(10.0, 11)
+    x = m.q.reshape(-1, 2) * 1.05
+    term = _placed(kind, x[1:] if kind == "contact_plane" else x, 1e-2)
+    scene = Scene(m, 0.1, [PressureWork(), term], fixed=[1] if m.closed else [0, 1, 2 * (m.nodes - 1)])
+    q = np.concatenate([x.ravel(), [b.z0 for b in scene.bodies]])
+    assert scene.inadmissible(q) is None
+    for _ in range(50):
+        dq = rng.normal(scale=1.0, size=q.size)
+        dq[list(scene.fixed)] = 0
+        alpha = scene.max_step(q, dq)
+        assert 0 < alpha <= 1
+        assert scene.inadmissible(q + alpha * dq) is None
+        if alpha < 0.9:                   # cut by a gap: going 1/0.9 further reaches it (within 1e-9)
+            far = q + alpha / 0.9 * (1 + 1e-9) * dq
+            assert scene.inadmissible(far) is not None
+
+
+def test_contact_force_of_a_pressed_ring_balances_the_pressure():
+    """A torus inflated against a rod: the rod's total force equals the pressure force on the
+    contact patch only loosely, but Newton's equilibrium has zero residual and positive gaps."""
+    from snapmem.newton import NewtonOptions, solve
+    m = torus(0.1, 0.02, 60)
+    law = make_law("mooney_rivlin", c1=4.225e5 * 7 / 16, c2=4.225e5 / 16)
+    rod = Rod(kappa=1e4, dhat=1e-3, radius=0.0795)
+    scene = Scene(m, 1e-4, [Stretching(law), PressureWork(), rod], fixed=[1], loads={"pressure": 0.0})
+    eq = solve(scene, {"pressure": 300.0}, q0=m.q, options=NewtonOptions(max_iterations=60))
+    assert eq.converged
+    report = contact_report(scene, eq.q)
+    assert report["rod_gap"] > 0
+    assert report["rod_force"] > 0
+    # the radial reaction on the rod equals the radial resultant of the membrane on the ring nodes
+    x = scene.node_coordinates(eq.q)
+    d = x[:, 0] - rod.radius
+    assert np.all(d > 0)
+
+
+def test_bordered_matrix_matches_dense():
+    rng = np.random.default_rng(0)
+    n, b, k = 30, 3, 2
+    A = np.zeros((n, n))
+    for d in range(-b, b + 1):
+        v = rng.normal(size=n - abs(d))
+        A += np.diag(v, d)
+    A = A + A.T + np.diag(np.linspace(-3, 20, n))
+    B = rng.normal(size=(n, k))
+    C = rng.normal(size=(k, k))
+    C = C + C.T
+    M = BorderedMatrix(BandedMatrix.from_dense(A, b), B, C)
+    D = M.to_dense()
+    assert M.n == n + k
+    x = rng.normal(size=n + k)
+    np.testing.assert_allclose(M.matvec(x), D @ x, rtol=1e-12, atol=1e-12)
+    lu = M.lu()
+    np.testing.assert_allclose(lu.solve(D @ x), x, rtol=1e-9, atol=1e-9)
+    X = rng.normal(size=(n + k, 3))
+    np.testing.assert_allclose(lu.solve(D @ X), X, rtol=1e-9, atol=1e-9)
+    ev = np.linalg.eigvalsh(D)
+    np.testing.assert_allclose(M.smallest_eigenvalues(3), ev[:3], rtol=1e-10, atol=1e-10)
+    assert M.negative_count() == int(np.count_nonzero(ev < 0))
