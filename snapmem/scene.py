@@ -18,7 +18,7 @@ from typing import Callable, Iterable, Mapping
 import numpy as np
 
 from .banded import BandedMatrix
-from .bordered import BorderedMatrix
+from .bordered import BodyMatrix
 from .errors import SnapmemError, check_real
 from .kinematics import EdgeKinematics
 from .materials import Density
@@ -38,7 +38,7 @@ class Evaluation:
         dPi/dq over all degrees of freedom [N]; at fixed ones it is the reaction force (negated).
     residual : ndarray (n_free,) or None
         The gradient on the free degrees of freedom, in band order.
-    stiffness : BandedMatrix, BorderedMatrix or None
+    stiffness : BandedMatrix, BodyMatrix or None
         K = d2Pi/dq2 on the free degrees of freedom, in band order [N/m] (bordered by one dense
         row and column per rigid body when the scene has bodies).
     """
@@ -245,7 +245,7 @@ class Scene:
                 stiffness = self._bordered(stiffness, nodes)
         return Evaluation(energy, gradient, gradient[self.free], stiffness)
 
-    def _bordered(self, band: BandedMatrix, nodes) -> BorderedMatrix:
+    def _bordered(self, band: BandedMatrix, nodes) -> BodyMatrix:
         """The band bordered by the rigid bodies' rows and columns (node-body and body-body blocks)."""
         k = len(self.bodies)
         border = np.zeros((self.n_band, k))
@@ -261,7 +261,7 @@ class Scene:
             corner[np.ix_(cols, cols)] += h[:, 2:, 2:].sum(axis=0)
             if local.body_hessian is not None:
                 corner[np.ix_(cols, cols)] += local.body_hessian
-        return BorderedMatrix(band, border, corner)
+        return BodyMatrix(band, border, corner)
 
     def energy(self, q, loads=None) -> float:
         return self.evaluate(q, loads, order=0).energy

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from snapmem.banded import BandedMatrix
-from snapmem.bordered import BorderedMatrix
+from snapmem.bordered import BodyMatrix
 from snapmem.contact import CONTACT_EXAMPLES, Ball, Plane, Rod, Shell, barrier, contact_report
 from snapmem.meridian import sphere, torus
 from snapmem.scene import Scene
@@ -76,7 +76,7 @@ def test_contact_derivatives_over_barrier_widths(kind, dhat):
     assert np.max(np.abs(K - K_fd)) <= 1e-5 * np.max(np.abs(K))
     np.testing.assert_allclose(K, K.T, rtol=0, atol=1e-12 * np.max(np.abs(K)))
     if kind == "contact_ball_body":
-        assert isinstance(ev.stiffness, BorderedMatrix) and ev.stiffness.n == scene.n_free
+        assert isinstance(ev.stiffness, BodyMatrix) and ev.stiffness.n == scene.n_free
         assert np.any(ev.stiffness.border != 0)
 
 
@@ -132,7 +132,7 @@ def test_bordered_matrix_matches_dense():
     B = rng.normal(size=(n, k))
     C = rng.normal(size=(k, k))
     C = C + C.T
-    M = BorderedMatrix(BandedMatrix.from_dense(A, b), B, C)
+    M = BodyMatrix(BandedMatrix.from_dense(A, b), B, C)
     D = M.to_dense()
     assert M.n == n + k
     x = rng.normal(size=n + k)
