@@ -16,7 +16,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .errors import SolverError, check_int, check_real
+from .errors import SnapmemError, SolverError, check_int, check_real
 from .scene import Evaluation, Scene
 
 log = logging.getLogger(__name__)
@@ -46,6 +46,25 @@ class NewtonOptions:
         check_int("max_cuts", self.max_cuts, minimum=0)
 
 
+#: How a solve can end: NewtonReport.status is one of these words (``reason`` says more).
+STATUSES = {
+    "converged": "max |R| on the free degrees of freedom is below the tolerance",
+    "max_iterations": "the iteration limit was reached before convergence",
+    "step_too_small": "no step along the Newton direction reduces the residual (line search failed)",
+    "left_domain": "every trial step, however short, left the model's domain (material lock, "
+                   "non-positive radius, collapsed edge)",
+    "singular": "the tangent stiffness is singular",
+    "not_finite": "the residual is NaN or inf",
+    "no_equilibrium": "loading from rest cannot reach the load: a limit point or the end of the "
+                      "material's domain lies before it",
+    "failed": "any other failure (see reason)",
+}
+_REASON_STATUS = (("converged", "converged"), ("max iterations", "max_iterations"),
+                  ("line search failed", "step_too_small"), ("left the model's domain", "left_domain"),
+                  ("singular", "singular"), ("residual is not finite", "not_finite"),
+                  ("no equilibrium", "no_equilibrium"))
+
+
 @dataclass
 class NewtonReport:
     """How a Newton solve went.
@@ -59,6 +78,7 @@ class NewtonReport:
         max |R| over free degrees of freedom at the returned state [N].
     reason : str
         'converged', or why not ('max iterations', 'singular tangent', 'line search failed: ...').
+        ``status`` is the same as one word of :data:`STATUSES`.
     step_cuts : int
         Total step halvings.
     history : list of float
@@ -71,6 +91,16 @@ class NewtonReport:
     reason: str
     step_cuts: int = 0
     history: list = field(default_factory=list)
+
+    @property
+    def status(self) -> str:
+        """One word of :data:`STATUSES` for this report's ``reason``."""
+        if self.converged:
+            return "converged"
+        for start, status in _REASON_STATUS:
+            if self.reason.startswith(start):
+                return status
+        return "failed"
 
     def lines(self) -> list[str]:
         return [f"converged: {self.converged}", f"iterations: {self.iterations}",
@@ -128,9 +158,11 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
         alpha = min(1.0, max_step(q, dq))
         merit = float(ev.residual @ ev.residual)
         report.iterations += 1
+        outside = None
         for _cut in range(options.max_cuts + 1):
             trial = q + alpha * dq
-            if inadmissible(trial) is None:
+            outside = inadmissible(trial)
+            if outside is None:
                 ev_trial = residual_and_jacobian(trial)
                 trial_merit = float(ev_trial.residual @ ev_trial.residual)
                 if np.isfinite(trial_merit) and trial_merit <= (1.0 - 1e-4 * alpha) * merit:
@@ -138,7 +170,8 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
             alpha *= 0.5
             report.step_cuts += 1
         else:
-            report.reason = "line search failed: no step reduces the residual"
+            report.reason = ("line search failed: no step reduces the residual" if outside is None else
+                             f"left the model's domain: every trial step was outside it ({outside})")
             break
         q, ev = trial, ev_trial
         norm = _norm(ev.residual)
@@ -186,33 +219,56 @@ def start_guess(scene: Scene, loads: Mapping[str, float]) -> np.ndarray:
     return scene.reference_state() if scene.start_guess is None else scene.start_guess(loads)
 
 
+#: The order in which ``equilibrium`` applies loads (the paper inflates, then actuates).
+LOAD_ORDER = ("pressure", "voltage")
+
+
 def equilibrium(scene: Scene, loads: Mapping[str, float] | None = None,
-                options: NewtonOptions = NewtonOptions(), min_fraction_step: float = 1e-6) -> Equilibrium:
+                options: NewtonOptions = NewtonOptions(), min_fraction_step: float = 1e-4) -> Equilibrium:
     """The equilibrium reached by loading quasi-statically from rest to ``loads``.
 
-    Tries Newton at the full load first; if that fails, scales all loads by t from 0 to 1 in
-    adaptive increments (halved on failure, grown on easy steps) with a secant predictor. If
-    the increments fall below ``min_fraction_step`` the load path has passed a limit point
-    (or the model's domain ends) and the last converged state is returned, not converged.
+    Loads are applied one after the other (``LOAD_ORDER``: pressure, then voltage, then any
+    other), each in adaptive increments (halved on failure, grown when easy) with a secant
+    predictor. If the increments stall, the path has reached a limit point: the membrane snaps.
+    The branch is then traced past the fold (pseudo-arclength) to where the load is back at its
+    target; the report's reason says so ('snapped through at pressure = ...'). If that state is
+    not stable, or the branch never returns to the target, the result is not converged.
     """
     target = scene.resolve_loads(loads)
-    base = {k: 0.0 for k in target}
+    current = {k: 0.0 for k in target}
+    order = [k for k in LOAD_ORDER if k in target] + [k for k in target if k not in LOAD_ORDER]
+    if scene.start_guess is not None and any(target.values()):
+        # singular at rest (a flat plate): start just off rest, on the way to the target
+        current = {k: 1e-3 * v for k, v in target.items()}
+    last = solve(scene, current, q0=start_guess(scene, current), options=options)
+    if not last.converged:
+        last.report.reason = f"no equilibrium at the start of the load path: {last.report.reason}"
+        return last
+    iterations, notes = last.report.iterations, []
+    for name in order:
+        if target[name] == current[name]:
+            continue
+        last, its, note = _ramp(scene, last, current, name, target[name], options, min_fraction_step)
+        iterations += its
+        current = dict(last.loads)
+        if note:
+            notes.append(note)
+        if not last.converged:
+            break
+    last.report.iterations = iterations
+    if last.converged and notes:
+        last.report.reason = "converged; " + "; ".join(notes)
+    return last
+
+
+def _ramp(scene, start: Equilibrium, loads, name, value, options, min_fraction_step):
+    """Take load ``name`` from loads[name] to ``value`` by increments; snap through folds."""
+    a = loads[name]
 
     def at(t):
-        return {k: base[k] + t * (target[k] - base[k]) for k in target}
+        return {**loads, name: a + t * (value - a)}
 
-    first = solve(scene, target, options=options)
-    if first.converged and _is_stable(first):
-        return first
-    t, dt = 0.0, 0.25
-    if scene.start_guess is not None:       # singular at rest (a flat plate): start just above
-        t = 1e-3
-    q = start_guess(scene, at(t))
-    previous = None
-    last = solve(scene, at(t), q0=q, options=options)
-    if not last.converged:
-        return last
-    iterations = last.report.iterations
+    t, dt, last, previous, iterations = 0.0, 0.25, start, None, 0
     while t < 1.0:
         t_new = min(1.0, t + dt)
         guess = last.q if previous is None else last.q + (last.q - previous[1]) * (t_new - t) / (t - previous[0])
@@ -222,16 +278,40 @@ def equilibrium(scene: Scene, loads: Mapping[str, float] | None = None,
             previous, last, t = (t, last.q), trial, t_new
             if trial.report.iterations <= 4:
                 dt *= 1.5
-        else:
-            dt *= 0.5
-            if dt < min_fraction_step:
-                loads_reached = ", ".join(f"{k}={v:.6g}" for k, v in at(t).items())
+            continue
+        dt *= 0.5
+        if dt < min_fraction_step:
+            snapped = _snap_by_tracing(scene, last, name, value)
+            if snapped is None:
                 last.report.converged = False
-                last.report.reason = (f"no equilibrium on the load path from rest beyond {loads_reached} "
+                last.report.reason = (f"no equilibrium on the load path beyond {name} = {at(t)[name]:.6g} "
                                       "(a limit point or the edge of the material's domain)")
-                return last
-    last.report.iterations = iterations
-    return last
+                return last, iterations, None
+            return snapped, iterations + snapped.report.iterations, f"snapped through at {name} = {at(t)[name]:.6g}"
+    return last, iterations, None
+
+
+def _snap_by_tracing(scene, last: Equilibrium, name, value):
+    """Trace past the fold from ``last`` to the next state with load ``name`` = value; None if none."""
+    from .continuation import ContinuationOptions, trace      # continuation builds on this module
+    try:
+        branch = trace(scene, name, until={name: value}, start=(last.q, last.loads),
+                       options=ContinuationOptions(max_steps=500, stability=True))
+    except SnapmemError as exc:
+        log.info("snap-through trace failed: %s", exc)
+        return None
+    except SolverError as exc:
+        log.info("snap-through trace failed: %s", exc)
+        return None
+    end = branch.states[-1]
+    if not branch.status.startswith(f"{name} reached") or end.negative not in (0, None):
+        return None
+    q = scene.reference_state()
+    q[scene.free] = end.x
+    loads = {**last.loads, name: value}
+    eq = solve(scene, loads, q0=q)
+    eq.report.iterations += branch.stats["newton_iterations"]
+    return eq if eq.converged else None
 
 
 def _is_stable(eq: Equilibrium) -> bool:
