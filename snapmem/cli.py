@@ -9,6 +9,11 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
 
 from .errors import SnapmemError, SolverError
 from .scenes import SCENES, get_spec
@@ -17,6 +22,16 @@ from .scenes import SCENES, get_spec
 class _Parser(argparse.ArgumentParser):
     def error(self, message):          # one line, exit 2, like every other bad input
         raise SnapmemError(message)
+
+
+def _number(name, kind):
+    """An argparse type whose bad values give the same one-line message as a bad --set."""
+    def convert(text):
+        from .errors import check_int, check_real
+        from .sweep import parse_value
+        value = parse_value(name, text, number=True)
+        return check_int(name, value) if kind is int else check_real(name, value)
+    return convert
 
 
 def parse_sets(pairs: list[str]) -> dict:
@@ -54,6 +69,155 @@ def cmd_equilibrium(args) -> int:
     return 0 if eq.converged else 1
 
 
+def parse_until(pairs: list[str]) -> dict:
+    """``["stretch=4"]`` -> ``{"stretch": 4.0}``."""
+    out = {}
+    for name, value in parse_sets(pairs).items():
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise SnapmemError(f"--until {name}={value!r}: the value must be a number") from None
+    return out
+
+
+def parse_values(text: str) -> tuple[str, list[float]]:
+    """``NAME=START:STOP:COUNT`` or ``NAME=v1,v2,...`` -> (name, values)."""
+    name, sep, spec = text.partition("=")
+    if not sep or not name.strip() or not spec.strip():
+        raise SnapmemError(f"--vary {text!r}: must be NAME=START:STOP:COUNT or NAME=v1,v2,...")
+    try:
+        if ":" in spec:
+            start, stop, count = spec.split(":")
+            count = int(count)
+            if count < 1:
+                raise ValueError
+            values = list(np.linspace(float(start), float(stop), count))
+        else:
+            values = [float(v) for v in spec.split(",")]
+    except ValueError:
+        raise SnapmemError(f"--vary {text!r}: must be NAME=START:STOP:COUNT (COUNT >= 1) or NAME=v1,v2,...") from None
+    return name.strip(), values
+
+
+class Progress:
+    """A one-line progress display on stderr, redrawn at most 5 times a second (only on a terminal)."""
+
+    def __init__(self, enabled: bool | None = None):
+        self.enabled = sys.stderr.isatty() if enabled is None else enabled
+        self.last = 0.0
+        self.start = time.perf_counter()
+
+    def show(self, text: str, force: bool = False):
+        now = time.perf_counter()
+        if self.enabled and (force or now - self.last > 0.2):
+            self.last = now
+            print(f"\r{text} [{now - self.start:.1f} s]\033[K", end="", file=sys.stderr, flush=True)
+
+    def done(self):
+        if self.enabled:
+            print(file=sys.stderr)
+
+
+def cmd_trace(args) -> int:
+    from .continuation import ContinuationOptions, load_points, trace
+    from .results import write_table
+    params = parse_sets(args.set)
+    control = args.control
+    with_loads = ("voltage",) if control in ("voltage", "E_hat") else ()
+    scene = get_spec(args.scene).build(with_loads, **params)
+    until = parse_until(args.until) if args.until else {"stretch_max": 4.0}
+    options = ContinuationOptions(max_steps=args.max_steps, stop_at_first_limit=args.stop_at_first_limit,
+                                  save_at=tuple(float(v) for v in args.save_at or ()))
+    start = None
+    if args.restart:
+        saved = load_points(args.restart)
+        index = args.start_index
+        if not -len(saved["lam"]) <= index < len(saved["lam"]):
+            raise SnapmemError(f"--start-index {index}: the file has {len(saved['lam'])} points")
+        loads = dict(scene.loads)
+        if saved["meta"]["control"] in ("pressure", "voltage"):
+            loads[saved["meta"]["control"]] = float(saved["lam"][index])
+        elif saved["meta"]["control"] == "E_hat":
+            loads["voltage"] = float(saved["lam"][index]) * scene.thickness * (scene.mu / scene.permittivity) ** 0.5
+        elif saved["meta"]["control"] == "volume":
+            loads["pressure"] = float(saved["x"][index][-1])
+        start = (saved["q"][index], loads)
+    bar = Progress()
+    counter = {"n": 0}
+
+    def progress(point, row):
+        counter["n"] += 1
+        bar.show(f"trace {scene.name}: step {counter['n']}  {control} = {point.lam:.6g}")
+
+    branch = trace(scene, control, until=until, options=options, start=start, progress=progress)
+    bar.done()
+    meta = {"command": "trace", "scene": scene.name, "parameters": scene.parameters, "control": control,
+            "until": until, "status": branch.status, "stats": branch.stats}
+    if args.out:
+        write_table(branch.table, args.out, meta)
+        branch.save(str(Path(args.out).with_suffix(".npz")))
+    if args.points:
+        write_table(branch.points, args.points, meta)
+    if args.plot:
+        from .plotting import plot_branch
+        x = args.x or next(iter(scene.probes), "u_max")
+        plot_branch(branch.table, x, control if control != "volume" else "pressure", path=args.plot,
+                    title=f"{scene.name}: {branch.status}")
+    print(f"status: {branch.status}")
+    print(f"points: {len(branch.table)}  steps: {branch.stats['steps']}  rejected: {branch.stats['rejected']}  "
+          f"newton_iterations: {branch.stats['newton_iterations']}")
+    for _, row in branch.points.iterrows():
+        print(f"{row['kind']}: {control if control != 'volume' else 'pressure'} = "
+              f"{row['control'] if control != 'volume' else row['pressure']:.10g}  u_max = {row['u_max']:.6g}  "
+              f"stretch_max = {row['stretch_max']:.6g}  located = {row['located']}")
+    if branch.points.empty:
+        print("no critical points")
+    return 0
+
+
+def cmd_fold(args) -> int:
+    from .continuation import fold_curve
+    from .results import write_table
+    params = parse_sets(args.set)
+    name, values = parse_values(args.vary)
+    spec = get_spec(args.scene)
+    with_loads = ("voltage",) if args.control in ("voltage", "E_hat") or name in ("E_hat", "voltage") else ()
+    spec.resolve(**{**params, name: values[0]})          # unknown names fail before any work
+    bar = Progress()
+    table = fold_curve(lambda v: spec.build(with_loads, **{**params, name: v}), values, args.control,
+                       progress=lambda i, n: bar.show(f"fold {args.scene}: {i}/{n} values of {name}"))
+    bar.done()
+    table = table.rename(columns={"value": name, "limit": f"{args.control}_limit"})
+    meta = {"command": "fold", "scene": args.scene, "parameters": params, "vary": name, "control": args.control}
+    if args.out:
+        write_table(table, args.out, meta)
+    if args.plot:
+        from .plotting import plot_xy
+        plot_xy(table, name, f"{args.control}_limit", args.plot, title=f"{args.scene}: limit points")
+    with pd.option_context("display.width", 200, "display.max_columns", 12):
+        print(table[[name, f"{args.control}_limit", "exists", "method", "iterations", "u_max"]].to_string(index=False))
+    return 0
+
+
+def cmd_sweep(args) -> int:
+    from .sweep import make_job, parse_axis, sweep
+    fixed = parse_sets(args.set)
+    if args.pressure is not None:
+        fixed["pressure"] = args.pressure
+    axes = {}
+    for text in args.grid:
+        name, values = parse_axis(text)
+        if name in axes:
+            raise SnapmemError(f"--grid {name!r}: given twice")
+        axes[name] = values
+    job = make_job(args.job, args.scene, fixed, axes)
+    table = sweep(job, axes, args.out, workers=args.workers, scheduler=args.scheduler,
+                  timeout=args.timeout, progress=not args.quiet)
+    counts = table["status"].value_counts()
+    print(f"{args.out}: {len(table)} rows; " + ", ".join(f"{s} {n}" for s, n in sorted(counts.items())))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="snapmem", description="Snap-through of axisymmetric dielectric-elastomer membranes.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -69,6 +233,48 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
     p.add_argument("--pressure", type=str, help="pressure (inside minus outside), scene units")
     p.set_defaults(func=cmd_equilibrium)
+
+    p = sub.add_parser("sweep", help="run a grid of designs in parallel, one CSV row each; rerun to resume")
+    p.add_argument("scene")
+    p.add_argument("--grid", action="append", required=True, metavar="NAME=START:STOP:COUNT|NAME=v1,v2,...",
+                   help="a grid axis (repeatable; every combination runs)")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="fixed scene parameter (repeatable)")
+    p.add_argument("--pressure", type=str, help="pressure of every design (or make it a --grid axis)")
+    p.add_argument("--out", required=True, help="CSV file; designs already in it are skipped")
+    p.add_argument("--job", default="equilibrium", help="what to compute per design (default: equilibrium)")
+    p.add_argument("--workers", type=_number("workers", int), help="processes (default: the number of cores)")
+    p.add_argument("--scheduler", help="'local' (a local Dask cluster) or tcp://HOST:PORT (needs snapmem[dask])")
+    p.add_argument("--timeout", type=_number("timeout", float), help="per-design time limit [s]")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_sweep)
+
+    p = sub.add_parser("trace", help="trace an equilibrium branch through its limit points")
+    p.add_argument("scene")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
+    p.add_argument("--control", choices=["pressure", "voltage", "E_hat", "volume"], default="pressure")
+    p.add_argument("--until", action="append", metavar="NAME=VALUE",
+                   help="stop when an output reaches a value (default stretch_max=4)")
+    p.add_argument("--out", metavar="BRANCH.csv", help="branch table (+ .json parameters, .npz states)")
+    p.add_argument("--points", metavar="POINTS.csv", help="critical points table")
+    p.add_argument("--plot", metavar="FIG.png", help="plot of the branch")
+    p.add_argument("--x", help="column on the plot's x axis (default: the scene's first probe or u_max)")
+    p.add_argument("--save-at", type=float, action="append", metavar="VALUE",
+                   help="locate a point exactly at this control value (repeatable)")
+    p.add_argument("--stop-at-first-limit", action="store_true")
+    p.add_argument("--max-steps", type=int, default=2000)
+    p.add_argument("--restart", metavar="BRANCH.npz", help="start from a point saved by an earlier trace")
+    p.add_argument("--start-index", type=int, default=-1, help="which saved point to restart from (default last)")
+    p.set_defaults(func=cmd_trace)
+
+    p = sub.add_parser("fold", help="follow a limit point as a second parameter varies")
+    p.add_argument("scene")
+    p.add_argument("--vary", required=True, metavar="NAME=START:STOP:COUNT",
+                   help="scene parameter to vary, as a range or a list v1,v2,...")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
+    p.add_argument("--control", choices=["pressure", "voltage", "E_hat"], default="pressure")
+    p.add_argument("--out", metavar="FOLD.csv")
+    p.add_argument("--plot", metavar="FIG.png")
+    p.set_defaults(func=cmd_fold)
     return parser
 
 

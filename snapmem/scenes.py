@@ -218,6 +218,8 @@ def _balloon(params, with_loads):
 
 def _torus(params, with_loads):
     Rb, Rs = params["Rb"], params["Rs"]
+    if params["aspect_ratio"] is not None:
+        Rs = params["Rs"] = params["aspect_ratio"] * Rb
     if Rs >= Rb:
         raise SnapmemError(f"Rs = {Rs:g}: must be < Rb = {Rb:g} (the cross-section may not reach the axis)")
     meridian = torus(Rb, Rs, params["nodes"])
@@ -253,6 +255,8 @@ register(SceneSpec(
     "torus", "toroidal membrane, circle of radius Rs about (Rb, 0) (paper Figs 3f, 5)",
     _with_default(_common(100), H=0.1)
     + (Parameter("Rb", 10.0, "m", "axis to the centre of the cross-section", minimum=0.0, open_min=True),
-       Parameter("Rs", 2.0, "m", "cross-section radius (< Rb)", minimum=0.0, open_min=True))
+       Parameter("Rs", 2.0, "m", "cross-section radius (< Rb)", minimum=0.0, open_min=True),
+       Parameter("aspect_ratio", None, "", "Rs / Rb; if set, Rs = aspect_ratio * Rb", minimum=0.0,
+                 maximum=1.0, open_min=True, open_max=True))
     + material_parameters(),
     _torus))
