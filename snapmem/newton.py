@@ -129,14 +129,15 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
     -------
     q : ndarray
         Last accepted state (the start if nothing was accepted).
-    evaluation : Evaluation
-        Assembly at q.
+    evaluation : Evaluation or None
+        Assembly at q (None if the start is outside the model's domain).
     report : NewtonReport
     """
     q = np.array(q0, dtype=float)
     why = inadmissible(q)
     if why is not None:
-        raise SolverError(f"starting state is outside the model's domain: {why}")
+        return q, None, NewtonReport(False, 0, float("nan"),
+                                     f"left the model's domain: the starting state is outside it ({why})")
     ev = residual_and_jacobian(q)
     norm = _norm(ev.residual)
     report = NewtonReport(False, 0, norm, "max iterations")
@@ -211,7 +212,7 @@ def solve(scene: Scene, loads: Mapping[str, float] | None = None, q0: np.ndarray
         q0 = start_guess(scene, loads)
     q, ev, report = newton(lambda x: scene.evaluate(x, loads, order=2), q0, scene.free,
                            options.tol * scene.force_scale, options, scene.inadmissible, scene.max_step)
-    return Equilibrium(scene, q, loads, report, ev.stiffness)
+    return Equilibrium(scene, q, loads, report, None if ev is None else ev.stiffness)
 
 
 def start_guess(scene: Scene, loads: Mapping[str, float]) -> np.ndarray:
@@ -272,6 +273,8 @@ def _ramp(scene, start: Equilibrium, loads, name, value, options, min_fraction_s
     while t < 1.0:
         t_new = min(1.0, t + dt)
         guess = last.q if previous is None else last.q + (last.q - previous[1]) * (t_new - t) / (t - previous[0])
+        if scene.inadmissible(guess) is not None:      # the secant overshot a lock: restart from the last state
+            guess = last.q
         trial = solve(scene, at(t_new), q0=guess, options=options)
         iterations += trial.report.iterations
         if trial.converged:
