@@ -1,0 +1,522 @@
+"""Implicit dynamics M q'' + xi M q' + grad Pi(q, t) = 0 on the scene's own assembly.
+
+A time step is a Newton solve of the incremental potential
+
+    Pi(y, t*) + (1/2)(y - q_n - h v_n)^T M (y - q_n - h v_n) / h^2 + (1/2)(y - q_n)^T C (y - q_n) / h
+
+(C = xi M the mass-proportional damping), i.e. backward Euler with step h: the scene's gradient
+and banded (or bordered) stiffness plus the diagonal M / h^2 + C / h. Every energy term, contact
+barriers included, enters unchanged, and Newton's ``max_step`` keeps each iterate short of any
+contact gap, so no accepted state penetrates a body.
+
+Two schemes share that solve:
+
+* ``euler``: implicit (backward) Euler, the paper's scheme: y = q_{n+1}, h = dt, loads at
+  t_{n+1}. First order; it damps numerically (amplitude loss ~ (omega dt)^2 / 2 per step).
+* ``midpoint`` (default): the implicit midpoint rule. Solving the same problem with h = dt / 2
+  and loads at t_n + dt / 2 gives the midpoint y = (q_n + q_{n+1}) / 2 exactly (substitute
+  q_{n+1} = 2 y - q_n, v_{n+1} = 2 (y - q_n) / h - v_n into the midpoint rule); then extrapolate.
+  Chosen over BDF2, Newmark and generalised-alpha because it is second order, symplectic (no
+  numerical damping: the energy of an undamped oscillation stays bounded over long runs, which
+  the drift test checks) and needs nothing but the backward-Euler solve, one step of history and
+  no start-up procedure. Its lack of high-frequency dissipation is covered by the physical
+  damping xi; if the extrapolated state leaves the model's domain (a gap closed) the step is
+  rejected and cut.
+
+Adaptive steps: a step is cut (by 4) when Newton fails and (by the controller) when the local
+error estimate exceeds ``tol * L`` (L the meridian size); it grows by up to 2x when easy. The
+estimate is (dt^2 / 2) |a_{n+1}| for Euler (its local error) and (dt^2 / 6) |a_{n+1/2} - a_{n-1/2}|
+for the midpoint rule (a third difference, ~ dt^3 q''' / 6). Snaps get small steps, quasi-static
+ramps large ones.
+
+Loads are scheduled in time: any callable t -> {name: value}, or :func:`schedule` of
+piecewise-linear (t, value) points per load.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Mapping
+
+import numpy as np
+
+from .errors import SnapmemError, SolverError, check_int, check_real
+from .newton import NewtonOptions, newton, solve
+from .scene import Evaluation, Scene
+
+log = logging.getLogger(__name__)
+
+SCHEMES = ("midpoint", "euler")
+
+
+# ----------------------------------------------------------------------------------------------
+# loads in time
+@dataclass(frozen=True)
+class PiecewiseLinear:
+    """A piecewise-linear function of time through (t, value) points, constant outside them.
+
+    Attributes
+    ----------
+    times : tuple of float
+        Increasing times [s].
+    values : tuple of float
+        Values at those times (load units).
+    """
+
+    times: tuple
+    values: tuple
+
+    def __post_init__(self):
+        t = np.asarray(self.times, dtype=float)
+        if t.size == 0 or t.size != len(self.values) or np.any(np.diff(t) < 0):
+            raise SnapmemError(f"schedule times {list(self.times)}: need one value per time, times non-decreasing")
+
+    def __call__(self, t: float) -> float:
+        return float(np.interp(t, self.times, self.values))
+
+
+def schedule(**loads) -> Callable[[float], dict]:
+    """A load schedule t -> {name: value} from per-load constants, callables or (t, value) lists.
+
+    Examples
+    --------
+    >>> loads = schedule(pressure=[(0, 0), (5, 0), (20, 150)], voltage=300.0)
+    >>> loads(10.0)
+    {'pressure': 50.0, 'voltage': 300.0}
+    """
+    parts = {}
+    for name, spec in loads.items():
+        if callable(spec):
+            parts[name] = spec
+        elif np.ndim(spec) == 0:
+            parts[name] = (lambda c: lambda t: c)(float(spec))
+        else:
+            pts = np.asarray(spec, dtype=float)
+            parts[name] = PiecewiseLinear(tuple(pts[:, 0]), tuple(pts[:, 1]))
+
+    def at(t: float) -> dict:
+        return {name: f(t) for name, f in parts.items()}
+
+    at.breakpoints = sorted({float(x) for f in parts.values() for x in getattr(f, "times", ())})
+    return at
+
+
+def _as_schedule(loads) -> Callable[[float], dict]:
+    if loads is None:
+        return schedule()
+    if callable(loads):
+        return loads
+    return schedule(**dict(loads))
+
+
+# ----------------------------------------------------------------------------------------------
+# masses
+def lumped_masses(scene: Scene, rho: float) -> np.ndarray:
+    """Lumped mass of every degree of freedom, shape (n_dof,) [kg].
+
+    m_i = rho H A_i with A_i the node's reference ring area 2 pi r_bar_i l_bar_i (a pole node:
+    its cap), for both r_i and z_i; each rigid body's own mass for its height.
+    """
+    rho = check_real("rho", rho, minimum=0.0, min_inclusive=False)
+    m = np.repeat(rho * scene.thickness * scene.node_area, 2)
+    return np.concatenate([m, [b.mass for b in scene.bodies]])
+
+
+# ----------------------------------------------------------------------------------------------
+# options and results
+@dataclass(frozen=True)
+class DynamicsOptions:
+    """How to integrate in time.
+
+    Attributes
+    ----------
+    scheme : str
+        'midpoint' (second order, default) or 'euler' (first order, the paper's).
+    dt : float
+        First (or, with ``adaptive=False``, every) time step [s], default 1e-3.
+    adaptive : bool
+        Adapt the step to the local error estimate (default True).
+    tol : float
+        Local error tolerance per step as a fraction of the meridian size L (default 1e-4).
+    dt_min, dt_max : float
+        Step bounds [s] (defaults 1e-9 and 1.0).
+    newton : NewtonOptions
+        Tolerances of each step's Newton solve (residual relative to mu H L).
+    save_interval : float
+        Record a frame at most this often [s] (default 0: every accepted step); the last
+        step is always recorded, and ``min_gap`` holds the smallest gap since the previous frame.
+    max_steps : int
+        Accepted plus rejected steps at most (default 1_000_000).
+    """
+
+    scheme: str = "midpoint"
+    dt: float = 1e-3
+    adaptive: bool = True
+    tol: float = 1e-4
+    dt_min: float = 1e-9
+    dt_max: float = 1.0
+    newton: NewtonOptions = NewtonOptions(tol=1e-9, max_iterations=25)
+    save_interval: float = 0.0
+    max_steps: int = 1_000_000
+
+    def __post_init__(self):
+        if self.scheme not in SCHEMES:
+            raise SnapmemError(f"scheme = {self.scheme!r}: must be one of {', '.join(SCHEMES)}")
+        check_real("dt", self.dt, minimum=0.0, min_inclusive=False)
+        check_real("tol", self.tol, minimum=0.0, min_inclusive=False)
+        check_real("dt_min", self.dt_min, minimum=0.0, min_inclusive=False)
+        check_real("dt_max", self.dt_max, minimum=self.dt_min)
+        check_real("save_interval", self.save_interval, minimum=0.0)
+        check_int("max_steps", self.max_steps, minimum=1)
+
+    @property
+    def order(self) -> int:
+        return 2 if self.scheme == "midpoint" else 1
+
+
+@dataclass
+class Trajectory:
+    """Recorded frames of a simulation, and how the run went.
+
+    Attributes
+    ----------
+    data : dict of str -> ndarray
+        Per frame (T rows): ``t`` [s], ``r``, ``z`` (T, N) [m], ``v`` (T, n_dof) [m/s],
+        ``load_<name>``, ``volume`` [m^3], ``kinetic``, ``potential``, ``total`` [J], ``dt`` [s],
+        ``newton`` (iterations of the step), ``min_gap`` [m] (smallest contact gap over all
+        accepted steps since the previous frame; inf without contact), and for each contact
+        ``<body>_force`` [N] and ``<body>_gap`` [m], for each rigid body ``<name>_z`` [m] and
+        ``<name>_v`` [m/s].
+    meta : dict
+        Scene name and parameters, scheme, rho, damping, step and iteration counts, wall time.
+    """
+
+    data: dict
+    meta: dict = field(default_factory=dict)
+
+    def __getitem__(self, key) -> np.ndarray:
+        return self.data[key]
+
+    @property
+    def final_q(self) -> np.ndarray:
+        return self.data["q"][-1]
+
+    def save(self, path) -> None:
+        """Write a compressed .npz that loads without pickle (meta as a JSON string)."""
+        arrays = {k: np.asarray(v) for k, v in self.data.items()}
+        arrays["meta"] = np.array(json.dumps(self.meta, default=_json_default))
+        np.savez_compressed(path, **arrays)
+
+    @classmethod
+    def load(cls, path) -> "Trajectory":
+        with np.load(path, allow_pickle=False) as f:
+            data = {k: f[k] for k in f.files if k != "meta"}
+            meta = json.loads(str(f["meta"])) if "meta" in f.files else {}
+        return cls(data, meta)
+
+    def snap_time(self, key: str = "volume") -> float:
+        """Time of the fastest change of ``key`` (a snap-through or snap-back) [s]."""
+        t, y = self.data["t"], self.data[key]
+        rate = np.abs(np.diff(y) / np.maximum(np.diff(t), 1e-300))
+        i = int(np.argmax(rate))
+        return float(0.5 * (t[i] + t[i + 1]))
+
+
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)
+
+
+# ----------------------------------------------------------------------------------------------
+# the integrator
+class _Stepper:
+    """One implicit step (backward Euler solve of the incremental potential) on a scene."""
+
+    def __init__(self, scene: Scene, mass: np.ndarray, damping: np.ndarray, options: DynamicsOptions):
+        self.scene, self.mass, self.damping, self.options = scene, mass, damping, options
+        self.free = scene.free
+        self.tol = options.newton.tol * scene.force_scale
+
+    def solve(self, q, v, h, loads):
+        """y minimising the incremental potential of step h from (q, v); (y, report)."""
+        scene, free = self.scene, self.free
+        coef = self.mass / h ** 2 + self.damping / h
+        inertia_free = coef[free]
+        momentum = (self.mass * v / h)[free]
+
+        def assemble(y):
+            ev = scene.evaluate(y, loads, order=2)
+            residual = ev.residual + inertia_free * (y - q)[free] - momentum
+            K = ev.stiffness
+            if hasattr(K, "add_diagonal"):
+                K.add_diagonal(inertia_free)
+            else:
+                K.ab[2 * K.b] += inertia_free
+            return Evaluation(ev.energy, ev.gradient, residual, K)
+
+        guess = q + h * v
+        if scene.inadmissible(guess) is not None:
+            guess = q
+        # the inertia term's rounding floor, eps |q| M / h^2, grows as h falls: keep the tolerance above it
+        tol = max(self.tol, 1e3 * np.finfo(float).eps * float(np.max(inertia_free)) * self.scene.meridian.size)
+        y, _ev, report = newton(assemble, guess, free, tol, self.options.newton,
+                                scene.inadmissible, scene.max_step)
+        return y, report
+
+
+def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, damping: float = 0.0,
+             q0: np.ndarray | None = None, v0: np.ndarray | None = None, t0: float = 0.0,
+             options: DynamicsOptions = DynamicsOptions(), damp_bodies: bool = False,
+             progress: Callable[[float, float], None] | None = None,
+             stop: Callable[[float, np.ndarray, np.ndarray], bool] | None = None) -> Trajectory:
+    """Integrate the scene's motion from t0 to t_end.
+
+    Parameters
+    ----------
+    scene : Scene
+    loads : callable t -> mapping, mapping of schedules (see :func:`schedule`), or None
+        Loads in time; loads the schedule does not name keep the scene's defaults.
+    t_end : float
+        End time [s].
+    rho : float
+        Mass density of the membrane [kg/m^3] (lumped masses, :func:`lumped_masses`).
+    damping : float
+        Mass-proportional damping coefficient xi [1/s] of the membrane.
+    q0, v0 : ndarray (n_dof,), optional
+        Initial state (default the reference) and velocity (default rest).
+    options : DynamicsOptions
+    damp_bodies : bool
+        Apply xi to the rigid bodies too (default False: a ball flies freely).
+    progress : callable (t, t_end), optional
+        Called after every accepted step.
+    stop : callable (t, q, v) -> bool, optional
+        Ends the run early (after recording the step) when it returns True.
+
+    Returns
+    -------
+    Trajectory
+        Raises SolverError if the step falls below ``dt_min``.
+    """
+    wall = time.perf_counter()
+    t_end = check_real("t_end", t_end)
+    at = _as_schedule(loads)
+    xi = check_real("damping", damping, minimum=0.0)
+    mass = lumped_masses(scene, rho)
+    c = xi * mass
+    if not damp_bodies:
+        c[scene.n_node_dofs:] = 0.0
+    q = scene.reference_state() if q0 is None else np.array(q0, dtype=float)
+    v = np.zeros_like(q) if v0 is None else np.array(v0, dtype=float)
+    v[list(scene.fixed)] = 0.0
+    why = scene.inadmissible(q)
+    if why is not None:
+        raise SolverError(f"initial state is outside the model's domain: {why}")
+    stepper = _Stepper(scene, mass, c, options)
+    free = scene.free
+
+    def loads_at(t):
+        return scene.resolve_loads(at(t))
+
+    def acceleration(q, v, t):
+        a = np.zeros_like(q)
+        g = scene.evaluate(q, loads_at(t), order=1).gradient
+        a[free] = -(g[free] + c[free] * v[free]) / mass[free]
+        return a
+
+    recorder = _Recorder(scene, mass, options.save_interval)
+    a_prev = acceleration(q, v, t0)
+    t, dt = t0, min(options.dt, max(t_end - t0, options.dt_min))
+    recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)
+    steps = rejected = iterations = 0
+    p = options.order
+    length = scene.meridian.size
+    breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
+    while t < t_end - 1e-12 * max(1.0, abs(t_end)):
+        if steps + rejected >= options.max_steps:
+            raise SolverError(f"max_steps = {options.max_steps} reached at t = {t:.6g} s")
+        dt = min(dt, t_end - t)
+        upcoming = [b for b in breaks if t + 1e-12 < b < t + dt]
+        if upcoming:                                  # land on schedule kinks
+            dt = upcoming[0] - t
+        if t_end - (t + dt) < 1e-3 * dt:
+            dt = t_end - t
+        h = dt / 2 if p == 2 else dt
+        loads_now = loads_at(t + h)
+        y, report = stepper.solve(q, v, h, loads_now)
+        iterations += report.iterations
+        if not report.converged:
+            rejected += 1
+            dt *= 0.25
+            log.debug("t = %.6g: Newton failed (%s); dt -> %.3g", t, report.reason, dt)
+            if dt < options.dt_min:
+                raise SolverError(f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
+                                  f"(Newton: {report.reason})")
+            continue
+        if p == 2:
+            q_new = 2.0 * y - q
+            v_new = 2.0 * (y - q) / h - v
+            if scene.inadmissible(q_new) is not None:
+                rejected += 1
+                dt *= 0.5
+                if dt < options.dt_min:
+                    raise SolverError(f"time step fell below dt_min at t = {t:.6g} s (extrapolated state "
+                                      f"inadmissible: {scene.inadmissible(q_new)})")
+                continue
+        else:
+            q_new, v_new = y, (y - q) / h
+        a_new = (v_new - v) / dt
+        err = 0.0
+        if options.adaptive:
+            est = (dt * dt / 6.0) * np.abs(a_new - a_prev) if p == 2 else (dt * dt / 2.0) * np.abs(a_new)
+            err = float(np.max(est[free])) / (options.tol * length)
+            if err > 1.0 and dt > options.dt_min:
+                rejected += 1
+                dt = max(options.dt_min, dt * max(0.2, 0.9 * err ** (-1.0 / (p + 1))))
+                continue
+        t += dt
+        q, v, a_prev = q_new, v_new, a_new
+        steps += 1
+        recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations,
+                        force=t >= t_end - 1e-12 * max(1.0, abs(t_end)))
+        if progress is not None:
+            progress(t, t_end)
+        if stop is not None and stop(t, q, v):
+            recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations, force=True)
+            break
+        if options.adaptive:
+            grow = 2.0 if err == 0.0 else min(2.0, 0.9 * err ** (-1.0 / (p + 1)))
+            if report.iterations > 6:
+                grow = min(grow, 1.0)
+            dt = min(options.dt_max, max(options.dt_min, dt * grow))
+    meta = {"scene": scene.name, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
+            "damping": xi, "steps": steps, "rejected": rejected, "newton_iterations": iterations,
+            "wall_time": time.perf_counter() - wall, "t0": t0, "t_end": float(t),
+            "nodes": scene.meridian.nodes, "closed": scene.meridian.closed,
+            "bodies": [b.name for b in scene.bodies], "options": asdict(options)}
+    return recorder.trajectory(meta)
+
+
+class _Recorder:
+    """Collects frames; cheap per-step work (smallest gap) every step, the rest per frame."""
+
+    def __init__(self, scene: Scene, mass, interval: float):
+        from .contact import contact_terms
+        self.scene, self.mass, self.interval = scene, mass, interval
+        self.contacts = contact_terms(scene)
+        self.rows: list[dict] = []
+        self.last_t = -np.inf
+        self.min_gap = np.inf
+
+    def _gap(self, q):
+        x = self.scene.node_coordinates(q)
+        gaps = [t.gaps(x, y).min() for t, y in zip(self.scene.node_terms, self.scene.body_coordinates(q))
+                if t in self.contacts]
+        return min(gaps) if gaps else np.inf
+
+    def record(self, t, q, v, loads, dt, iterations, force=False):
+        from .contact import contact_report
+        self.min_gap = min(self.min_gap, self._gap(q))
+        if not force and t - self.last_t < self.interval:
+            return
+        if self.rows and self.rows[-1]["t"] == t:
+            self.rows.pop()
+        scene = self.scene
+        x = scene.node_coordinates(q)
+        kinetic = 0.5 * float(self.mass @ (v * v))
+        potential = scene.energy(q, loads)
+        row = {"t": t, "q": q.copy(), "r": x[:, 0].copy(), "z": x[:, 1].copy(), "v": v.copy(),
+               "volume": scene.volume(q), "kinetic": kinetic, "potential": potential,
+               "total": kinetic + potential, "dt": dt, "newton": iterations, "min_gap": self.min_gap}
+        row.update({f"load_{k}": val for k, val in loads.items()})
+        row.update(contact_report(scene, q))
+        for i, body in enumerate(scene.bodies):
+            row[f"{body.name}_z"] = q[scene.n_node_dofs + i]
+            row[f"{body.name}_v"] = v[scene.n_node_dofs + i]
+        self.rows.append(row)
+        self.last_t = t
+        self.min_gap = np.inf
+
+    def trajectory(self, meta) -> Trajectory:
+        keys = self.rows[0].keys()
+        data = {k: np.array([row[k] for row in self.rows]) for k in keys}
+        return Trajectory(data, meta)
+
+
+# ----------------------------------------------------------------------------------------------
+# snap-through: from a state (a located limit point pushed past) to rest on the far branch
+@dataclass
+class Settled:
+    """The rest state reached by :func:`settle`.
+
+    Attributes
+    ----------
+    q : ndarray (n_dof,)
+        Equilibrium polished by a static Newton solve at the final loads (if it converged).
+    loads : dict
+    trajectory : Trajectory
+    at_rest : bool
+        Whether the motion died out before ``t_max`` and the static polish converged.
+    """
+
+    q: np.ndarray
+    loads: dict
+    trajectory: Trajectory
+    at_rest: bool
+
+
+def settle(scene: Scene, q: np.ndarray, loads=None, rho: float = 1.0, damping: float = 1.0,
+           t_max: float = 1e3, rest_tol: float = 1e-6, options: DynamicsOptions = DynamicsOptions(),
+           v0: np.ndarray | None = None) -> Settled:
+    """Run the damped dynamics from q (e.g. just past a limit point) until it comes to rest.
+
+    Parameters
+    ----------
+    scene : Scene
+    q : ndarray (n_dof,)
+        Starting state (at rest unless ``v0``).
+    loads : mapping or schedule
+        Loads (constant, or in time); default the scene's.
+    rho, damping : float
+        Membrane density [kg/m^3] and mass-proportional damping xi [1/s] (> 0 to come to rest).
+    t_max : float
+        Give up after this long [s].
+    rest_tol : float
+        At rest when the speed is below rest_tol * L * xi and the acceleration below
+        rest_tol * L * xi^2 (L the meridian size): what motion is left would move a node by
+        less than about rest_tol * L.
+
+    Returns
+    -------
+    Settled
+        The rest state (polished to a static equilibrium with :func:`snapmem.newton.solve`), the
+        loads there and the trajectory: hand ``q`` back to continuation to go on along the far
+        branch.
+    """
+    at = _as_schedule(loads if loads is not None else {})
+    check_real("damping", damping, minimum=0.0, min_inclusive=False)
+    length = scene.meridian.size
+    free = scene.free
+    vmax, amax = rest_tol * length * damping, rest_tol * length * damping ** 2
+    state = {"v_prev": None, "t_prev": None}
+
+    def at_rest(t, q_now, v_now):
+        prev, t_prev = state["v_prev"], state["t_prev"]
+        state["v_prev"], state["t_prev"] = v_now.copy(), t
+        if prev is None or np.max(np.abs(v_now[free])) > vmax:
+            return False
+        return np.max(np.abs((v_now - prev)[free])) / max(t - t_prev, 1e-300) <= amax
+
+    traj = simulate(scene, at, t_max, rho=rho, damping=damping, q0=q, v0=v0, options=options, stop=at_rest)
+    q_end = traj.final_q
+    final_loads = scene.resolve_loads(at(float(traj["t"][-1])))
+    eq = solve(scene, final_loads, q0=q_end)
+    moved = np.max(np.abs(eq.q - q_end)) if eq.converged else np.inf
+    ok = bool(eq.converged and moved <= 1e3 * rest_tol * length and traj["t"][-1] < t_max)
+    log.info("settle: t = %.4g s, static polish %s, moved %.3g m", traj["t"][-1], eq.report.reason, moved)
+    return Settled(eq.q if eq.converged else q_end, final_loads, traj, ok)
