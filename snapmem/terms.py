@@ -46,7 +46,11 @@ class EdgeTerm(Term):
     """A term that gives its energy directly per edge, in the edge's 4 coordinates."""
 
     def edge_local(self, kin: EdgeKinematics, loads, order: int):
-        """Return (energy, gradient (E, 4) or None, Hessian (E, 4, 4) or None) for order 0, 1, 2."""
+        """Return (energy, gradient (E, 4) or None, Hessian (4, 4, E) or None) for order 0, 1, 2.
+
+        The Hessian is entry-major: ``hess[i, j]`` is the (E,) vector of entry (i, j) of every
+        edge's 4x4 block, so each entry is one contiguous array.
+        """
         raise NotImplementedError
 
     def load_gradient(self, kin: EdgeKinematics, loads, name: str) -> np.ndarray:
@@ -116,31 +120,36 @@ class PressureWork(EdgeTerm):
     loads = ("pressure",)
 
     @staticmethod
-    def volume_local(kin: EdgeKinematics, order: int):
-        """Per-edge volume, its gradient (E, 4) and Hessian (E, 4, 4) (None below ``order``)."""
+    def volume_local(kin: EdgeKinematics, order: int, scale: float = 1.0):
+        """Per-edge volume, its gradient (E, 4) and entry-major Hessian (4, 4, E) (None below ``order``).
+
+        ``scale`` multiplies the gradient and Hessian (not the volume), so -p dV needs no copy.
+        """
         c = np.pi / 3.0
         ra, rb, dz = kin.ra, kin.rb, kin.dz
         s = ra * ra + ra * rb + rb * rb
         v = c * s * dz
         if order < 1:
             return v, None, None
+        c *= scale
+        s = c * s
         ga, gb = c * (2.0 * ra + rb), c * (ra + 2.0 * rb)
-        grad = np.stack([ga * dz, -c * s, gb * dz, c * s], axis=1)
+        grad = np.stack([ga * dz, -s, gb * dz, s], axis=1)
         if order < 2:
             return v, grad, None
-        hess = np.zeros((v.size, 4, 4))
-        hess[:, 0, 0] = hess[:, 2, 2] = 2.0 * c * dz
-        hess[:, 0, 2] = hess[:, 2, 0] = c * dz
-        hess[:, 0, 1] = hess[:, 1, 0] = -ga
-        hess[:, 0, 3] = hess[:, 3, 0] = ga
-        hess[:, 2, 1] = hess[:, 1, 2] = -gb
-        hess[:, 2, 3] = hess[:, 3, 2] = gb
+        hess = np.zeros((4, 4, v.size))
+        hess[0, 0] = hess[2, 2] = 2.0 * c * dz
+        hess[0, 2] = hess[2, 0] = c * dz
+        hess[0, 1] = hess[1, 0] = -ga
+        hess[0, 3] = hess[3, 0] = ga
+        hess[2, 1] = hess[1, 2] = -gb
+        hess[2, 3] = hess[3, 2] = gb
         return v, grad, hess
 
     def edge_local(self, kin, loads, order):
         p = loads["pressure"]
-        v, g, h = self.volume_local(kin, order)
-        return (-p * v.sum(), None if g is None else -p * g, None if h is None else -p * h)
+        v, g, h = self.volume_local(kin, order, scale=-p)
+        return -p * v.sum(), g, h
 
     def load_gradient(self, kin, loads, name):
         assert name == "pressure"
