@@ -54,12 +54,13 @@ class BandedMatrix:
         return K
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
-        """K @ x for x of shape (n,)."""
+        """K @ x for x of shape (n,) or (n, m)."""
         n, b = self.n, self.b
-        y = self.ab[2 * b] * x
+        ab = self.ab if x.ndim == 1 else self.ab[:, :, None]
+        y = ab[2 * b] * x
         for d in range(1, b + 1):
-            y[d:] += self.ab[2 * b + d, : n - d] * x[: n - d]      # below the diagonal
-            y[: n - d] += self.ab[2 * b - d, d:] * x[d:]           # above
+            y[d:] += ab[2 * b + d, : n - d] * x[: n - d]      # below the diagonal
+            y[: n - d] += ab[2 * b - d, d:] * x[d:]           # above
         return y
 
     def lower(self) -> np.ndarray:
@@ -72,22 +73,26 @@ class BandedMatrix:
         return BandedLU(lu, piv, self.b, singular=info > 0)
 
     def smallest_eigenvalues(self, k: int) -> np.ndarray:
-        """The k smallest eigenvalues, ascending (O(n b^2): band reduction then bisection)."""
+        """The k smallest eigenvalues, ascending, exactly (LAPACK band reduction: O(n^2 b) work,
+        so a reference for tests and small problems; solvers use :meth:`eigenvalues_near_zero`)."""
         k = min(k, self.n)
         return eig_banded(self.lower(), lower=True, eigvals_only=True, select="i",
                           select_range=(0, k - 1), check_finite=False)
 
-    def negative_count(self, known: np.ndarray | None = None) -> int:
-        """Number of negative eigenvalues (the inertia index).
+    def eigenvalues_near_zero(self, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13):
+        """The k eigenvalues of smallest magnitude, ascending, and their vectors: O(n b^2).
 
-        ``known`` are the smallest eigenvalues already computed; only if all of them are
-        negative is the full count computed by bisection on (-inf, 0).
+        See :func:`eigenvalues_near_zero`.
         """
-        if known is not None and (known.size == self.n or known[-1] >= 0):
-            return int(np.count_nonzero(known < 0))
-        neg = eig_banded(self.lower(), lower=True, eigvals_only=True, select="v",
-                         select_range=(-np.inf, 0.0), check_finite=False)
-        return int(neg.size)
+        return eigenvalues_near_zero(self, k, start, lu, tol)
+
+    def negative_count(self, known: np.ndarray | None = None) -> int:
+        """Number of negative eigenvalues (the inertia index), from the pivot signs of a band
+        LDL^T factorisation (Sylvester): O(n b^2). ``known`` is accepted for compatibility and ignored.
+        """
+        from .kernels import band_ldlt_inertia         # numba: compiled (or loaded) on first use
+        negative, _ = band_ldlt_inertia(self.lower(), self.b)
+        return int(negative)
 
 
 class BandedLU:
@@ -140,6 +145,10 @@ class BorderedMatrix:
     def lu(self) -> "BorderedLU":
         return BorderedLU(self)
 
+    def eigenvalues_near_zero(self, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13):
+        """As :meth:`BandedMatrix.eigenvalues_near_zero` (for a symmetric bordering)."""
+        return eigenvalues_near_zero(self, k, start, lu, tol)
+
 
 class BorderedLU:
     """Factorisation of a :class:`BorderedMatrix`: LU of A and the k x k Schur complement."""
@@ -163,3 +172,57 @@ class BorderedLU:
         """Solve M x = rhs (rhs of shape (n,) or (n, m)); one refinement step."""
         x = self._eliminate(rhs)
         return x + self._eliminate(rhs - self.M.matvec(x))
+
+
+def eigenvalues_near_zero(M, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13,
+                          tol_others: float = 1e-6, max_iterations: int = 40):
+    """The k eigenvalues of a symmetric matrix nearest zero, ascending, with their eigenvectors.
+
+    Inverse subspace iteration on the factorisation (M needs ``lu()``, ``matvec`` and ``n``) with
+    Rayleigh-Ritz and four guard vectors; each iteration is one solve with k + 4 right-hand sides,
+    so the cost is O(n b^2). Warm-started from ``start`` (the vectors of a nearby state) it
+    converges in one or two iterations; near a critical point the eigenvalue crossing zero is
+    far smaller than the others and converges fastest.
+
+    The eigenvalue nearest zero (the one whose sign change marks a critical point) is converged
+    until its residual is below ``tol`` |K| or stops halving (rounding), the others below
+    ``tol_others`` |K|.
+
+    Returns
+    -------
+    values : ndarray (k,)
+    vectors : ndarray (n, k)
+    """
+    n = M.n
+    k = min(k, n)
+    m = min(n, k + 4)
+    rng = np.random.default_rng(7)
+    V = rng.normal(size=(n, m))
+    if start is not None:
+        start = np.asarray(start).reshape(n, -1)[:, :m]
+        V[:, : start.shape[1]] = start
+    if lu is None:
+        lu = M.lu()
+    if lu.singular:          # exactly singular: shift by a hair (the eigenvalues are then shifted back)
+        raise np.linalg.LinAlgError("matrix is exactly singular")
+    V, _ = np.linalg.qr(V)
+    scale = None
+    previous = np.inf
+    theta = np.zeros(m)
+    for _ in range(max_iterations):
+        W, _ = np.linalg.qr(lu.solve(np.asfortranarray(V)))
+        KW = M.matvec(W)
+        H = W.T @ KW
+        theta, Y = np.linalg.eigh(0.5 * (H + H.T))
+        order = np.argsort(np.abs(theta))
+        theta, Y = theta[order], Y[:, order]
+        V, KV = W @ Y, KW @ Y
+        if scale is None:
+            scale = max(np.max(np.abs(KW)), 1e-300)
+        residual = np.linalg.norm(KV[:, :k] - V[:, :k] * theta[:k], axis=0)
+        first_done = residual[0] <= tol * scale or residual[0] > 0.5 * previous   # converged, or at rounding
+        previous = residual[0]
+        if first_done and np.all(residual[1:] <= tol_others * scale):
+            break
+    ascending = np.argsort(theta[:k])
+    return theta[:k][ascending], V[:, :k][:, ascending]

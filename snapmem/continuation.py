@@ -66,7 +66,8 @@ class ContinuationOptions:
     max_angle : float
         Largest angle between consecutive tangents [rad] before a step is cut, default 0.3.
     n_eigs : int
-        Smallest eigenvalues watched at every point, default 3.
+        Eigenvalues nearest zero watched at every point, default 2 (the negative count comes
+        from an LDL^T factorisation, not from these).
     stability : bool
         Compute eigenvalues and inertia at every point (default True).
     locate : bool
@@ -87,7 +88,7 @@ class ContinuationOptions:
     max_corrector_iterations: int = 8
     target_iterations: int = 3
     max_angle: float = 0.3
-    n_eigs: int = 3
+    n_eigs: int = 2
     stability: bool = True
     locate: bool = True
     stop_at_first_limit: bool = False
@@ -124,6 +125,7 @@ class Point:
     kind: str = ""           # '', 'LP', 'BP', 'SAVE', 'END'
     located: bool = False
     coupling: float = float("nan")   # |phi0 . dR/dlambda| / (|phi0| |dR/dlambda|) at a critical point
+    vectors: np.ndarray | None = field(default=None, repr=False)   # eigenvectors of ``eigs``
 
     @property
     def test_value(self) -> float:
@@ -256,9 +258,13 @@ class LoadProblem:
     def inadmissible(self, x, lam):
         return self.scene.inadmissible(self.state(x, lam)[0])
 
-    def stability(self, K, x, lam, n_eigs):
-        eigs = K.smallest_eigenvalues(n_eigs)
-        return eigs, K.negative_count(eigs)
+    def stability(self, K, x, lam, n_eigs, start=None, tol=1e-10):
+        """(the n_eigs eigenvalues of K nearest zero, ascending; the negative count; their vectors).
+
+        ``tol`` bounds the residual of the eigenvalue nearest zero relative to |K|.
+        """
+        eigs, vectors = K.eigenvalues_near_zero(n_eigs, start, tol=tol)
+        return eigs, K.negative_count(), vectors
 
     def measures(self, x, lam) -> dict:
         q, loads = self.state(x, lam)
@@ -312,15 +318,15 @@ class VolumeProblem(LoadProblem):
         d[-1] = -1.0
         return d
 
-    def stability(self, J, x, lam, n_eigs):
+    def stability(self, J, x, lam, n_eigs, start=None, tol=1e-10):
         K = J.A
-        eigs = K.smallest_eigenvalues(n_eigs)
-        neg = K.negative_count(eigs)
-        g = J.C[:, 0]
         lu = K.lu()
-        if not lu.singular and g @ lu.solve(g) < 0:
+        eigs, vectors = K.eigenvalues_near_zero(n_eigs, start, lu, tol)
+        neg = K.negative_count()
+        g = J.C[:, 0]
+        if g @ lu.solve(g) < 0:
             neg -= 1
-        return eigs, neg
+        return eigs, neg, vectors
 
 
 
@@ -395,20 +401,30 @@ class _Tracer:
             x, lam = x + d[:-1], lam + d[-1]
         return None, "corrector failed"
 
-    def finish(self, p: Point, J, previous_tangent):
-        """Tangent and stability at a converged point."""
-        p.tangent = self.tangent(p.x, p.lam, J, previous_tangent)
+    def finish(self, p: Point, J, previous: Point | None, tangent: bool = True, precise: bool = False):
+        """Tangent (oriented along the previous point's) and stability at a converged point.
+
+        ``precise`` converges the eigenvalue nearest zero to machine precision (for locating a
+        critical point, 1e-13 |K| or rounding); otherwise to 1e-10 |K|, plenty to count and report.
+        """
+        if tangent:
+            p.tangent = self.tangent(p.x, p.lam, J, None if previous is None else previous.tangent)
         if self.opt.stability:
-            p.eigs, p.negative = self.pb.stability(J, p.x, p.lam, self.opt.n_eigs)
+            try:
+                p.eigs, p.negative, p.vectors = self.pb.stability(
+                    J, p.x, p.lam, self.opt.n_eigs, None if previous is None else previous.vectors,
+                    tol=1e-13 if precise else 1e-10)
+            except np.linalg.LinAlgError as exc:
+                raise SolverError(f"stability: {exc}") from None
         return p
 
-    def point_at(self, base: Point, s: float):
+    def point_at(self, base: Point, s: float, tangent: bool = True, precise: bool = True):
         """The converged point at arclength s from base (with eigenvalues), or raise SolverError."""
         p, J = self.correct(base, s)
         if p is None:
             raise SolverError(f"corrector failed while locating: {J}")
         p.s = base.s + s
-        return self.finish(p, J, base.tangent), J
+        return self.finish(p, J, base, tangent, precise), J
 
 
 def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | None = None,
@@ -456,7 +472,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
         if p is not None:
             p.s, p.ds = base.s + ds, ds
             try:
-                tracer.finish(p, J, base.tangent)
+                tracer.finish(p, J, base)
             except SolverError as exc:
                 reason = str(exc)
         if reason is None:
@@ -483,7 +499,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
         inserts = [c for c in new_critical if c is not None]
         for value in save_at:
             if (base.lam - value) * (p.lam - value) < 0:
-                q = _locate_value(tracer, base, p, lambda pt: pt.lam - value, "SAVE")
+                q = _locate_value(tracer, base, p, lambda pt, s: pt.lam - value, "SAVE")
                 if q is not None:
                     inserts.append(q)
         stop_point, stop_name = None, None
@@ -491,7 +507,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
             f0 = _output(pb, base, name) - value
             f1 = _output(pb, p, name) - value
             if f0 * f1 <= 0 and f1 != f0:
-                stop_point = _locate_value(tracer, base, p, lambda pt, n=name, v=value: _output(pb, pt, n) - v, "END")
+                stop_point = _locate_value(tracer, base, p, lambda pt, s, n=name, v=value: _output(pb, pt, n) - v, "END")
                 stop_name = f"{name} reached {value:g}"
                 break
         if stop_point is not None:
@@ -547,36 +563,76 @@ def _output(pb, p: Point, name: str) -> float:
     return float(m[name])
 
 
-def _locate_value(tracer, base: Point, p: Point, f, kind: str):
-    """The point between base and p where f(point) = 0, by Brent's method on the arclength."""
-    cache = {}
+def _locate_value(tracer, base: Point, p: Point, f, kind: str, known: dict | None = None):
+    """The point between base and p where f(point, s) = 0, by Brent's method on the arclength.
+
+    ``known`` maps arclength offsets to points already computed (the ends). Intermediate
+    points get no tangent (only the located one does); each starts its eigenvalue iteration
+    from the vectors of the last point computed, so it converges in one sweep.
+    """
+    cache = dict(known or {})
+    last = [base]
 
     def g(s):
         if s not in cache:
-            cache[s] = tracer.point_at(base, s)[0]
-        return f(cache[s])
+            pt = tracer.point_at(_with_vectors(base, last[0]), s, tangent=False)[0]
+            cache[s] = pt
+            last[0] = pt
+        return f(cache[s], s)
 
+    ds = p.s - base.s
     try:
-        s = brentq(g, 0.0, p.s - base.s, xtol=1e-14 * (p.s - base.s), rtol=4 * np.finfo(float).eps, maxiter=60)
+        s = brentq(g, 0.0, ds, xtol=1e-13 * ds, rtol=4 * np.finfo(float).eps, maxiter=60)
     except (SolverError, ValueError) as exc:
         log.warning("could not locate %s point: %s", kind, exc)
         return None
-    pt = tracer.point_at(base, s)[0]
+    pt = tracer.point_at(_with_vectors(base, last[0]), s)[0]
     pt.kind, pt.located = kind, True
     return pt
 
 
+def _with_vectors(base: Point, donor: Point) -> Point:
+    """``base`` with the eigenvectors of ``donor`` (a warm start for the eigenvalue iteration)."""
+    if donor is base or donor.vectors is None:
+        return base
+    clone = Point(base.x, base.lam, base.tangent, base.eigs, base.negative, base.s, base.ds)
+    clone.vectors = donor.vectors
+    return clone
+
+
+def _crossing_index(pt: Point, rising_side_positive: bool):
+    """Index in pt.eigs of the eigenvalue nearest zero on one side (None if the set has none)."""
+    pick = np.flatnonzero(pt.eigs >= 0) if rising_side_positive else np.flatnonzero(pt.eigs < 0)
+    if pick.size == 0:
+        return None
+    return pick[np.argmin(pt.eigs[pick])] if rising_side_positive else pick[np.argmax(pt.eigs[pick])]
+
+
 def _locate_critical(tracer, base: Point, p: Point):
-    """Locate the zero of the eigenvalue whose sign change altered the inertia between base and p."""
-    k = min(base.negative, p.negative)                 # index of the crossing eigenvalue
+    """Locate the zero of the eigenvalue whose sign change altered the inertia between base and p.
 
-    def eig_k(pt):
-        if k < pt.eigs.size:
-            return float(pt.eigs[k])
-        return float(pt.lam) * 0 + float(tracer.pb.stability(
-            tracer.pb.evaluate(pt.x, pt.lam)[1], pt.x, pt.lam, k + 1)[0][k])
+    At the two ends the inertia says which eigenvalue crosses (the smallest non-negative one on
+    the side with fewer negative eigenvalues, the largest negative one on the other). Inside the
+    bracket it is followed by continuity of its eigenvector from the nearest point already
+    computed: there the inertia count is unreliable within rounding of a singular K.
+    """
+    located = None
+    rising = p.negative > base.negative
+    i_base, i_p = _crossing_index(base, rising), _crossing_index(p, not rising)
+    if tracer.opt.locate and i_base is not None and i_p is not None and base.vectors is not None:
+        ds = p.s - base.s
+        tracked = {0.0: base.vectors[:, i_base], ds: p.vectors[:, i_p]}
+        ends = {0.0: float(base.eigs[i_base]), ds: float(p.eigs[i_p])}
 
-    located = _locate_value(tracer, base, p, eig_k, "critical") if tracer.opt.locate else None
+        def crossing(pt, s):
+            if s in ends:
+                return ends[s]
+            nearest = min(tracked, key=lambda t: abs(t - s))
+            i = int(np.argmax(np.abs(pt.vectors.T @ tracked[nearest])))
+            tracked[s] = pt.vectors[:, i]
+            return float(pt.eigs[i])
+
+        located = _locate_value(tracer, base, p, crossing, "critical", known={0.0: base, ds: p})
     if located is None:       # bracketed only: report the nearer end
         located = Point(p.x, p.lam, p.tangent, p.eigs, p.negative, p.s, p.ds, 0)
     located.kind = _classify(tracer, located, base, p)
@@ -625,7 +681,7 @@ def _touching(tracer, a: Point, b: Point, c: Point):
         return []
     log.info("an eigenvalue may touch zero near s = %.6g: checking", s_min)
     try:
-        mid = tracer.point_at(b, s_min - sb)[0] if s_min > sb else tracer.point_at(a, s_min - sa)[0]
+        mid = tracer.point_at(b, s_min - sb, tangent=False)[0] if s_min > sb else tracer.point_at(a, s_min - sa, tangent=False)[0]
     except SolverError:
         return []
     if mid.negative == b.negative:

@@ -26,3 +26,32 @@ def test_band_storage_solve_and_eigenvalues_match_dense(name):
 def test_closed_meridian_band_is_five_open_is_three():
     assert build_scene("torus", nodes=50).bandwidth == 5
     assert build_scene("balloon", nodes=51).bandwidth == 3
+
+
+@pytest.mark.parametrize("b", [1, 3, 5])
+@pytest.mark.parametrize("shift", [-2.0, 0.0, 0.7])
+def test_ldlt_inertia_counts_negative_eigenvalues_of_random_band_matrices(b, shift):
+    rng = np.random.default_rng(b * 100 + int(shift * 10) + 50)
+    n = 60
+    A = rng.normal(size=(n, n))
+    dense = np.zeros((n, n))
+    for d in range(-b, b + 1):
+        dense += np.diag(np.diagonal(A, d), d)
+    dense = 0.5 * (dense + dense.T) - shift * np.eye(n)
+    K = BandedMatrix.from_dense(dense, b)
+    assert K.negative_count() == np.count_nonzero(np.linalg.eigvalsh(dense) < 0)
+
+
+@pytest.mark.parametrize("name", ["balloon", "torus"])
+def test_eigenvalues_near_zero_match_dense(name):
+    scene = build_scene(name, nodes=40)
+    rng = np.random.default_rng(5)
+    q = scene.reference_state() * 1.5
+    q[scene.free] += rng.normal(scale=0.02, size=scene.n_free)
+    K = scene.evaluate(q, {"pressure": 0.012}).stiffness
+    values, vectors = K.eigenvalues_near_zero(3)
+    eig = np.linalg.eigvalsh(K.to_dense())
+    nearest = np.sort(eig[np.argsort(np.abs(eig))[:3]])
+    scale = np.abs(eig).max()
+    np.testing.assert_allclose(values, nearest, rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(np.abs(vectors.T @ vectors), np.eye(3), atol=1e-10)
