@@ -29,13 +29,13 @@ def designs(count, seed):
         scene = str(rng.choice(list(SIZE)))
         _, size, H = SIZE[scene]
         H *= float(np.exp(rng.uniform(-1, 1)))
-        out.append({"i": i, "scene": scene, "nodes": int(rng.integers(5, 42)),
+        out.append({"i": i, "scene": scene, "nodes": int(rng.integers(5, 31)),
                     "material": str(rng.choice(["mooney_rivlin", "neo_hookean", "gent", "yeoh"])),
                     "c1": float(rng.uniform(0.05, 0.6)), "c2": float(rng.uniform(0.0, 0.2)),
                     "Jlim": float(np.exp(rng.uniform(np.log(0.05), np.log(300)))), "H": H,
                     "ratio": float(rng.uniform(0.05, 1.05)),          # torus Rs/Rb; >= 1 is invalid
-                    "E_hat": float(rng.choice([0.0, rng.uniform(0, 0.6)])),
-                    "pressure": float(rng.uniform(-0.5, 3.0) * 1.5 * H / size)})
+                    "E_hat": float(rng.choice([0.0, rng.uniform(0, 0.4)])),
+                    "pressure": float(rng.uniform(-0.3, 1.5) * 1.5 * H / size)})
     return out
 
 
