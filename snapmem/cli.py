@@ -24,16 +24,6 @@ class _Parser(argparse.ArgumentParser):
         raise SnapmemError(message)
 
 
-def _number(name, kind):
-    """An argparse type whose bad values give the same one-line message as a bad --set."""
-    def convert(text):
-        from .errors import check_int, check_real
-        from .sweep import parse_value
-        value = parse_value(name, text, number=True)
-        return check_int(name, value) if kind is int else check_real(name, value)
-    return convert
-
-
 def parse_sets(pairs: list[str]) -> dict:
     """``["R=10", "nodes=51"]`` -> ``{"R": "10", "nodes": "51"}`` (values checked by the scene)."""
     out = {}
@@ -200,7 +190,7 @@ def cmd_fold(args) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from .sweep import make_job, parse_axis, sweep
+    from .sweep import make_job, parse_axis, parse_value, sweep
     fixed = parse_sets(args.set)
     if args.pressure is not None:
         fixed["pressure"] = args.pressure
@@ -211,8 +201,10 @@ def cmd_sweep(args) -> int:
             raise SnapmemError(f"--grid {name!r}: given twice")
         axes[name] = values
     job = make_job(args.job, args.scene, fixed, axes)
-    table = sweep(job, axes, args.out, workers=args.workers, scheduler=args.scheduler,
-                  timeout=args.timeout, progress=not args.quiet)
+    workers, timeout = (None if text is None else parse_value(name, text, number=True)
+                        for name, text in (("workers", args.workers), ("timeout", args.timeout)))
+    table = sweep(job, axes, args.out, workers=workers, scheduler=args.scheduler, timeout=timeout,
+                  progress=not args.quiet)
     counts = table["status"].value_counts()
     print(f"{args.out}: {len(table)} rows; " + ", ".join(f"{s} {n}" for s, n in sorted(counts.items())))
     return 0
@@ -242,9 +234,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pressure", type=str, help="pressure of every design (or make it a --grid axis)")
     p.add_argument("--out", required=True, help="CSV file; designs already in it are skipped")
     p.add_argument("--job", default="equilibrium", help="what to compute per design (default: equilibrium)")
-    p.add_argument("--workers", type=_number("workers", int), help="processes (default: the number of cores)")
+    p.add_argument("--workers", help="processes (default: the number of cores)")
     p.add_argument("--scheduler", help="'local' (a local Dask cluster) or tcp://HOST:PORT (needs snapmem[dask])")
-    p.add_argument("--timeout", type=_number("timeout", float), help="per-design time limit [s]")
+    p.add_argument("--timeout", help="per-design time limit [s]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_sweep)
 

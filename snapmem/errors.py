@@ -60,6 +60,26 @@ def check_int(name: str, value, *, minimum: int | None = None, maximum: int | No
     return as_int
 
 
+def check_array(name: str, value, shape: tuple) -> "np.ndarray":
+    """Return ``value`` as a finite float array of ``shape``, or raise SnapmemError naming ``name``."""
+    import numpy as np
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise SnapmemError(f"{name} = {_short(value)}: must be an array of numbers of shape {shape}") from None
+    if array.shape != tuple(shape):
+        raise SnapmemError(f"{name}: shape {array.shape}; must be {tuple(shape)}")
+    if not np.all(np.isfinite(array)):
+        bad = int(np.flatnonzero(~np.isfinite(array.ravel()))[0])
+        raise SnapmemError(f"{name}[{bad}] = {float(array.ravel()[bad])!r}: must be finite")
+    return array
+
+
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def _range_text(minimum, maximum, min_inclusive, max_inclusive) -> str:
     parts = []
     if minimum is not None:

@@ -16,7 +16,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .errors import SnapmemError, SolverError, check_int, check_real
+from .errors import SnapmemError, SolverError, check_array, check_int, check_real
 from .scene import Evaluation, Scene
 
 log = logging.getLogger(__name__)
@@ -210,6 +210,8 @@ def solve(scene: Scene, loads: Mapping[str, float] | None = None, q0: np.ndarray
     loads = scene.resolve_loads(loads)
     if q0 is None:
         q0 = start_guess(scene, loads)
+    else:
+        q0 = check_array("q0", q0, scene.reference_state().shape)
     q, ev, report = newton(lambda x: scene.evaluate(x, loads, order=2), q0, scene.free,
                            options.tol * scene.force_scale, options, scene.inadmissible, scene.max_step)
     return Equilibrium(scene, q, loads, report, None if ev is None else ev.stiffness)

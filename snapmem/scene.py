@@ -174,6 +174,9 @@ class Scene:
     def resolve_loads(self, loads: Mapping[str, float] | None) -> dict:
         """The scene's default loads updated by ``loads``; unknown names are an error."""
         out = dict(self.loads)
+        if loads is not None and not isinstance(loads, Mapping):
+            raise SnapmemError(f"loads = {loads!r}: must be a mapping of load names to values, "
+                               f"e.g. {{'pressure': 0.01}}; this scene has {sorted(out) or 'none'}")
         for key, value in (loads or {}).items():
             if key not in out:
                 raise SnapmemError(f"load {key!r}: this scene has no such load; it has {sorted(out) or 'none'}")
