@@ -126,6 +126,7 @@ class Point:
     located: bool = False
     coupling: float = float("nan")   # |phi0 . dR/dlambda| / (|phi0| |dR/dlambda|) at a critical point
     vectors: np.ndarray | None = field(default=None, repr=False)   # eigenvectors of ``eigs``
+    measured: dict | None = field(default=None, repr=False)        # cache of the problem's measures
 
     @property
     def test_value(self) -> float:
@@ -554,10 +555,16 @@ def _start(scene, pb, control, start):
     return pb.x_of(eq.q), pb.lam_of(loads)
 
 
+def _measures(pb, p: Point) -> dict:
+    if p.measured is None:
+        p.measured = pb.measures(p.x, p.lam)
+    return p.measured
+
+
 def _output(pb, p: Point, name: str) -> float:
     if name in ("lam", pb.control):
         return p.lam
-    m = pb.measures(p.x, p.lam)
+    m = _measures(pb, p)
     if name not in m:
         raise SnapmemError(f"until {name!r}: unknown output; allowed: {', '.join(k for k in m if k != 'taut')}")
     return float(m[name])
@@ -695,7 +702,7 @@ def _touching(tracer, a: Point, b: Point, c: Point):
 def _assemble(scene, control, pb, points, critical, rejections, status, tracer) -> Branch:
     rows = []
     for p in points:
-        m = pb.measures(p.x, p.lam)
+        m = _measures(pb, p)
         row = {"s": p.s, "control": p.lam, **m,
                "min_eig": p.test_value if p.eigs is None else float(p.eigs[0]),
                "negative_eigs": -1 if p.negative is None else int(p.negative),
@@ -706,7 +713,7 @@ def _assemble(scene, control, pb, points, critical, rejections, status, tracer) 
     table = pd.DataFrame(rows)
     crit_rows = []
     for c in critical:
-        m = pb.measures(c.x, c.lam)
+        m = _measures(pb, c)
         crit_rows.append({"kind": c.kind, "s": c.s, "control": c.lam, **m,
                           "min_eig": c.test_value, "located": c.located, "coupling": c.coupling})
     points_table = pd.DataFrame(crit_rows, columns=None if crit_rows else

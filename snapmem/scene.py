@@ -12,6 +12,7 @@ needs no corner block and the solve stays a plain O(N) band LU.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Iterable, Mapping
 
@@ -180,7 +181,7 @@ class Scene:
         for key, value in (loads or {}).items():
             if key not in out:
                 raise SnapmemError(f"load {key!r}: this scene has no such load; it has {sorted(out) or 'none'}")
-            out[key] = check_real(key, value)
+            out[key] = value if type(value) is float and math.isfinite(value) else check_real(key, value)
         return out
 
     # ----------------------------------------------------------------------------------------
