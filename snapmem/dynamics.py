@@ -20,11 +20,20 @@ Two schemes share that solve:
   numerical damping: the energy of an undamped oscillation stays bounded over long runs, which
   the drift test checks) and needs nothing but the backward-Euler solve, one step of history and
   no start-up procedure. Its lack of high-frequency dissipation is covered by the physical
-  damping xi; if the extrapolated state leaves the model's domain (a gap closed) the step is
-  rejected and cut.
+  damping xi. The extrapolation 2 y - q_n can cross a contact gap even though y does not (a
+  node arriving at a body): such a step is taken by implicit Euler instead (its state is
+  Newton's own, so it never penetrates), counted in ``meta['euler_fallbacks']``.
+
+* ``bdf2``: variable-step BDF2, the same solve again: with w = dt_n / dt_{n-1},
+  a0 = (1 + 2w) / (1 + w), h = dt / a0, x_hat = ((1 + w) q_n - w^2/(1 + w) q_{n-1}) / a0 and
+  v_hat likewise from the velocities, y = q_{n+1} solves the incremental potential from
+  (x_hat, v_hat) with step h. Second order and L-stable: it damps the membrane's unresolved
+  high-frequency ringing after a snap or an impact (which the midpoint rule keeps, forcing tiny
+  steps), and its state is Newton's own, so contact never needs a fallback. The robotic
+  scenes use it. Its first step is implicit Euler.
 
 Adaptive steps: a step is cut (by 4) when Newton fails and (by the controller) when the local
-error estimate exceeds ``tol * L`` (L the meridian size); it grows by up to 2x when easy. The
+error estimate exceeds ``tol`` times the membrane's current size; it grows by up to 2x when easy. The
 estimate is (dt^2 / 2) |a_{n+1}| for Euler (its local error) and (dt^2 / 6) |a_{n+1/2} - a_{n-1/2}|
 for the midpoint rule (a third difference, ~ dt^3 q''' / 6). Snaps get small steps, quasi-static
 ramps large ones.
@@ -49,7 +58,7 @@ from .scene import Evaluation, Scene
 
 log = logging.getLogger(__name__)
 
-SCHEMES = ("midpoint", "euler")
+SCHEMES = ("midpoint", "bdf2", "euler")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -134,13 +143,15 @@ class DynamicsOptions:
     Attributes
     ----------
     scheme : str
-        'midpoint' (second order, default) or 'euler' (first order, the paper's).
+        'midpoint' (second order, symplectic, default), 'bdf2' (second order, L-stable: for
+        contact and violent snaps) or 'euler' (first order, the paper's).
     dt : float
         First (or, with ``adaptive=False``, every) time step [s], default 1e-3.
     adaptive : bool
         Adapt the step to the local error estimate (default True).
     tol : float
-        Local error tolerance per step as a fraction of the meridian size L (default 1e-4).
+        Local error tolerance per step as a fraction of the membrane's size (the larger of the
+        reference size L and the current largest coordinate), default 1e-4.
     dt_min, dt_max : float
         Step bounds [s] (defaults 1e-9 and 1.0).
     newton : NewtonOptions
@@ -174,7 +185,7 @@ class DynamicsOptions:
 
     @property
     def order(self) -> int:
-        return 2 if self.scheme == "midpoint" else 1
+        return 1 if self.scheme == "euler" else 2
 
 
 @dataclass
@@ -333,7 +344,8 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     a_prev = acceleration(q, v, t0)
     t, dt = t0, min(options.dt, max(t_end - t0, options.dt_min))
     recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)
-    steps = rejected = iterations = 0
+    steps = rejected = iterations = fallbacks = 0
+    history = None                                     # (q_{n-1}, v_{n-1}, dt_{n-1}) for BDF2
     p = options.order
     length = scene.meridian.size
     breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
@@ -346,9 +358,18 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             dt = upcoming[0] - t
         if t_end - (t + dt) < 1e-3 * dt:
             dt = t_end - t
-        h = dt / 2 if p == 2 else dt
-        loads_now = loads_at(t + h)
-        y, report = stepper.solve(q, v, h, loads_now)
+        bdf2 = options.scheme == "bdf2" and history is not None
+        if bdf2:
+            # variable-step BDF2: v_{n+1} = (y - x_hat) / h, a_{n+1} = (v_{n+1} - v_hat) / h
+            w = dt / history[2]
+            a0, a1, a2 = (1 + 2 * w) / (1 + w), -(1 + w), w * w / (1 + w)
+            h = dt / a0
+            x_hat = -(a1 * q + a2 * history[0]) / a0
+            v_hat = -(a1 * v + a2 * history[1]) / a0
+            y, report = stepper.solve(x_hat, v_hat, h, loads_at(t + dt))
+        else:
+            h = dt / 2 if options.scheme == "midpoint" else dt
+            y, report = stepper.solve(q, v, h, loads_at(t + h))
         iterations += report.iterations
         if not report.converged:
             rejected += 1
@@ -358,28 +379,46 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 raise SolverError(f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
                                   f"(Newton: {report.reason})")
             continue
-        if p == 2:
+        order = p
+        if bdf2:
+            q_new, v_new = y, (y - x_hat) / h
+        elif options.scheme == "bdf2":            # its first step: implicit Euler
+            q_new, v_new, order = y, (y - q) / h, 1
+        elif p == 2:
             q_new = 2.0 * y - q
             v_new = 2.0 * (y - q) / h - v
             if scene.inadmissible(q_new) is not None:
-                rejected += 1
-                dt *= 0.5
-                if dt < options.dt_min:
-                    raise SolverError(f"time step fell below dt_min at t = {t:.6g} s (extrapolated state "
-                                      f"inadmissible: {scene.inadmissible(q_new)})")
-                continue
+                # the extrapolation crossed a contact gap (or a lock): take this step by implicit
+                # Euler instead, whose state is Newton's own and so always admissible
+                y, report_euler = stepper.solve(q, v, dt, loads_at(t + dt))
+                iterations += report_euler.iterations
+                if not report_euler.converged:
+                    rejected += 1
+                    dt *= 0.25
+                    if dt < options.dt_min:
+                        raise SolverError(f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
+                                          f"(Newton: {report_euler.reason})")
+                    continue
+                q_new, v_new, order = y, (y - q) / dt, 1
+                report.iterations += report_euler.iterations
+                fallbacks += 1
         else:
             q_new, v_new = y, (y - q) / h
         a_new = (v_new - v) / dt
         err = 0.0
         if options.adaptive:
-            est = (dt * dt / 6.0) * np.abs(a_new - a_prev) if p == 2 else (dt * dt / 2.0) * np.abs(a_new)
-            err = float(np.max(est[free])) / (options.tol * length)
+            if bdf2:
+                a_new = (v_new - v_hat) / h
+            c_err = 2.0 / 9.0 if bdf2 else 1.0 / 6.0
+            est = (c_err * dt * dt) * np.abs(a_new - a_prev) if order == 2 else (dt * dt / 2.0) * np.abs(a_new)
+            size = max(length, float(np.max(np.abs(q_new[: scene.n_node_dofs]))))     # grows with the membrane
+            err = float(np.max(est[free])) / (options.tol * size)
             if err > 1.0 and dt > options.dt_min:
                 rejected += 1
-                dt = max(options.dt_min, dt * max(0.2, 0.9 * err ** (-1.0 / (p + 1))))
+                dt = max(options.dt_min, dt * max(0.2, 0.9 * err ** (-1.0 / (order + 1))))
                 continue
         t += dt
+        history = (q, v, dt)
         q, v, a_prev = q_new, v_new, a_new
         steps += 1
         recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations,
@@ -390,12 +429,12 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations, force=True)
             break
         if options.adaptive:
-            grow = 2.0 if err == 0.0 else min(2.0, 0.9 * err ** (-1.0 / (p + 1)))
+            grow = 2.0 if err == 0.0 else min(2.0, 0.9 * err ** (-1.0 / (order + 1)))
             if report.iterations > 6:
                 grow = min(grow, 1.0)
             dt = min(options.dt_max, max(options.dt_min, dt * grow))
     meta = {"scene": scene.name, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
-            "damping": xi, "steps": steps, "rejected": rejected, "newton_iterations": iterations,
+            "damping": xi, "steps": steps, "rejected": rejected, "euler_fallbacks": fallbacks, "newton_iterations": iterations,
             "wall_time": time.perf_counter() - wall, "t0": t0, "t_end": float(t),
             "nodes": scene.meridian.nodes, "closed": scene.meridian.closed,
             "bodies": [b.name for b in scene.bodies], "options": asdict(options)}

@@ -260,3 +260,6 @@ register(SceneSpec(
                  maximum=1.0, open_min=True, open_max=True))
     + material_parameters(),
     _torus))
+
+
+from . import robots  # noqa: E402,F401  (registers the robotic scenes: pump, grippers, ball, torus_snap)

@@ -1,0 +1,332 @@
+"""The paper's soft robots (section 4) and its dynamic torus: scenes with their time schedules.
+
+Every scene here is registered like the validation scenes (``snapmem scenes`` lists them) and
+also has an *experiment*: the loads in time, the end time, density, damping and start state, so
+that ``snapmem simulate NAME`` or :func:`run` replays it. SI units; eps = 1e-10 F/m.
+
+* ``pump`` (Fig. 6): Gent plate R = 0.1 m at 300 V; pressure 0 until 5 s, +10 Pa/s to 15 s,
+  held; voltage removed at 15 s; pressure -10 Pa/s from 20 s to 0 at 30 s.
+* ``gripper_rod`` / ``gripper_shell`` (Fig. 7): torus Rb = 0.1 m, Rs = 0.02 m around a rod of
+  radius Rw (default 0.04 m) or inside a shell of inner radius Rw (default 0.25 m); pressure ramps
+  at ``rate`` to ``p_max`` and is held.
+* ``ball_drop`` (Fig. 8, case 1): balloon R = 0.1 m on a rigid plate, inflated to 500 Pa, a ball
+  (rb = 0.05 m, 0.5 kg, g = -10 m/s^2) dropped onto it from ``drop`` above the top.
+* ``ball_throw`` (Fig. 8, case 2): the ball resting on the balloon at 500 Pa; pressure rises at
+  100 Pa/s: the balloon snaps through and throws the ball.
+* ``torus_snap``: the default scene of the paper's C++ code (normalised units): torus Rs = 2
+  about Rb = 10, H = 0.1, Mooney-Rivlin mu = 4225, rho = 100, xi = 1 /s, 200 nodes; pressure
+  ramps at 100 /s to 200 and is held to t = 100 s; it snaps through.
+
+Mass-proportional damping acts on the membrane; in the ball scenes it acts on the ball too
+(``damp_ball``, default 1), as a mass-proportional damping of the whole system does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .contact import Ball, Plane, Rod, Shell
+from .dynamics import DynamicsOptions, Trajectory, schedule, simulate
+from .errors import SnapmemError
+from .meridian import disc, sphere, torus
+from .newton import NewtonOptions, solve
+from .scene import Scene
+from .scenes import (Parameter, SceneSpec, _common, _with_default, build_membrane, get_spec, material_parameters,
+                     register)
+
+EPS = 1e-10                     # permittivity of every robotic scene [F/m]
+MU_MR = 4.225e5                 # shear modulus of the gripper and ball membranes [Pa]
+
+
+@dataclass
+class Experiment:
+    """A scene with everything a simulation of it needs.
+
+    Attributes
+    ----------
+    scene : Scene
+    loads : callable t -> {name: value}
+    t_end : float
+        Default end time [s].
+    rho : float
+        Membrane density [kg/m^3].
+    damping : float
+        Mass-proportional damping xi [1/s].
+    q0, v0 : ndarray or None
+        Start state and velocity (None: reference, rest).
+    damp_bodies : bool
+        Whether xi acts on the rigid bodies too.
+    options : DynamicsOptions
+        Default time-stepping options of this experiment.
+    """
+
+    scene: Scene
+    loads: Callable[[float], dict]
+    t_end: float
+    rho: float
+    damping: float
+    q0: np.ndarray | None = None
+    v0: np.ndarray | None = None
+    damp_bodies: bool = False
+    options: DynamicsOptions = field(default_factory=DynamicsOptions)
+
+
+#: name -> function(scene) -> Experiment, for every scene that can be simulated with its own schedule
+EXPERIMENTS: dict[str, Callable[[Scene], Experiment]] = {}
+
+
+def experiment(name: str, **params) -> Experiment:
+    """The experiment of scene ``name`` with parameters overriding its defaults.
+
+    Scenes without an experiment of their own (plate, balloon, torus) are simulated at their
+    loads held constant from rest, with rho and xi of 1 (normalised units).
+    """
+    spec = get_spec(name)
+    scene = spec.build(**params)
+    if name in EXPERIMENTS:
+        return EXPERIMENTS[name](scene)
+    q0 = None if scene.start_guess is None else scene.start_guess(scene.loads)
+    loads = dict(scene.loads)
+    return Experiment(scene, lambda t: loads, 10.0, 1.0, 1.0, q0=q0)
+
+
+def run(name: str, t_end: float | None = None, options: DynamicsOptions | None = None,
+        progress=None, **params) -> Trajectory:
+    """Simulate the registered scene ``name`` with its own schedule (see module docstring)."""
+    ex = experiment(name, **params)
+    traj = simulate(ex.scene, ex.loads, ex.t_end if t_end is None else t_end, rho=ex.rho, damping=ex.damping,
+                    q0=ex.q0, v0=ex.v0, options=options or ex.options, damp_bodies=ex.damp_bodies,
+                    progress=progress)
+    return traj
+
+
+def _with_contact(scene: Scene, *contacts) -> Scene:
+    """The same scene with contact terms added."""
+    return Scene(scene.meridian, scene.thickness, scene.terms + tuple(contacts), fixed=scene.fixed,
+                 loads=scene.loads, name=scene.name, parameters=scene.parameters,
+                 start_guess=scene.start_guess, probes=scene.probes)
+
+
+def _dynamics_parameters(rho, xi, t_end, tol=1e-4):
+    return (Parameter("rho", rho, "kg/m^3", "membrane density", minimum=0.0, open_min=True),
+            Parameter("xi", xi, "1/s", "mass-proportional damping", minimum=0.0),
+            Parameter("t_end", t_end, "s", "end of the simulation", minimum=0.0, open_min=True),
+            Parameter("tol", tol, "", "local time-error tolerance per step, fraction of the size",
+                      minimum=0.0, open_min=True))
+
+
+def _contact_parameters(kappa, dhat):
+    return (Parameter("kappa", kappa, "Pa", "contact pressure scale of the barrier", minimum=0.0, open_min=True),
+            Parameter("dhat", dhat, "m", "barrier width", minimum=0.0, open_min=True))
+
+
+def _options(params, **extra) -> DynamicsOptions:
+    return DynamicsOptions(scheme="bdf2", tol=params["tol"], **extra)
+
+
+# ------------------------------------------------------------------------------------------
+# pump
+def _pump(params, with_loads):
+    R = params["R"]
+    meridian = disc(R, params["nodes"])
+    n = meridian.nodes
+    return build_membrane(params, tuple(with_loads) + ("voltage",), meridian, [0, 1, 2 * (n - 1)], "pump",
+                          probes={"deflection": lambda q: float(q[2 * n - 1])})
+
+
+def _pump_experiment(scene: Scene) -> Experiment:
+    p = scene.parameters
+    rate, t_up, t_hold, t_down = p["rate"], p["t_up"], p["t_hold"], p["t_down"]
+    p_top = rate * (t_hold - t_up)
+    t_zero = t_down + p_top / rate
+    phi = p["voltage"] if p["voltage"] is not None else 300.0
+    loads = schedule(pressure=[(0.0, 0.0), (t_up, 0.0), (t_hold, p_top), (t_down, p_top), (t_zero, 0.0)],
+                     voltage=[(0.0, phi), (t_hold, phi), (t_hold + p["t_switch"], 0.0)])
+    q0 = scene.start_guess({"pressure": 0.0})       # a shallow dome (1e-3 R): the flat plate is singular
+    return Experiment(scene, loads, p["t_end"], p["rho"], p["xi"], q0=q0,
+                      options=_options(p, dt=1e-3, dt_max=0.5))
+
+
+register(SceneSpec(
+    "pump", "fluid pump: Gent plate at 300 V, pressure cycle 0-30 s (paper Fig. 6)",
+    _with_default(_common(61), H=1e-4)
+    + (Parameter("R", 0.1, "m", "plate radius", minimum=0.0, open_min=True),)
+    + _with_default(material_parameters(material="gent", eps=EPS), voltage=300.0, mu=45e3)
+    + (Parameter("rate", 10.0, "Pa/s", "pressure rate up and down", minimum=0.0, open_min=True),
+       Parameter("t_up", 5.0, "s", "pressure starts rising", minimum=0.0),
+       Parameter("t_hold", 15.0, "s", "pressure held and voltage switched off", minimum=0.0),
+       Parameter("t_switch", 0.05, "s", "time the voltage takes to fall to 0", minimum=0.0, open_min=True),
+       Parameter("t_down", 20.0, "s", "pressure starts falling", minimum=0.0))
+    + _dynamics_parameters(1000.0, 1.0, 30.0),
+    _pump))
+EXPERIMENTS["pump"] = _pump_experiment
+
+
+# ------------------------------------------------------------------------------------------
+# grippers
+def _gripper(kind):
+    def build(params, with_loads):
+        Rb, Rs = params["Rb"], params["Rs"]
+        if Rs >= Rb:
+            raise SnapmemError(f"Rs = {Rs:g}: must be < Rb = {Rb:g}")
+        meridian = torus(Rb, Rs, params["nodes"])
+        scene = build_membrane(params, with_loads, meridian, [1], f"gripper_{kind}",
+                               probes={"outer_radius": lambda q: float(q[0::2][: meridian.nodes].max()),
+                                       "inner_radius": lambda q: float(q[0::2][: meridian.nodes].min())})
+        Rw = params["Rw"]
+        if kind == "rod":
+            if not 0 < Rw < Rb - Rs:
+                raise SnapmemError(f"Rw = {Rw:g}: the rod must fit in the hole, 0 < Rw < Rb - Rs = {Rb - Rs:g}")
+            body = Rod(kappa=params["kappa"], dhat=params["dhat"], radius=Rw)
+        else:
+            if Rw <= Rb + Rs:
+                raise SnapmemError(f"Rw = {Rw:g}: the shell must lie outside the torus, Rw > Rb + Rs = {Rb + Rs:g}")
+            body = Shell(kappa=params["kappa"], dhat=params["dhat"], radius=Rw)
+        return _with_contact(scene, body)
+    return build
+
+
+def _gripper_experiment(scene: Scene) -> Experiment:
+    p = scene.parameters
+    t_top = p["p_max"] / p["rate"]
+    loads = schedule(pressure=[(0.0, 0.0), (t_top, p["p_max"])])
+    return Experiment(scene, loads, p["t_end"], p["rho"], p["xi"], options=_options(p, dt=1e-3, dt_max=0.5))
+
+
+for _kind, _rw, _pmax in (("rod", 0.04, 2500.0), ("shell", 0.25, 2500.0)):
+    register(SceneSpec(
+        f"gripper_{_kind}",
+        f"toroidal gripper {'around a rod' if _kind == 'rod' else 'inside a cylindrical shell'} (paper Fig. 7)",
+        _with_default(_common(80), H=1e-4)
+        + (Parameter("Rb", 0.1, "m", "axis to the centre of the cross-section", minimum=0.0, open_min=True),
+           Parameter("Rs", 0.02, "m", "cross-section radius (< Rb)", minimum=0.0, open_min=True),
+           Parameter("Rw", _rw, "m", "rod radius" if _kind == "rod" else "inner radius of the shell",
+                     minimum=0.0, open_min=True))
+        + _with_default(material_parameters(eps=EPS), mu=MU_MR)
+        + _contact_parameters(1e5, 5e-4)
+        + (Parameter("rate", 100.0, "Pa/s", "pressure rate", minimum=0.0, open_min=True),
+           Parameter("p_max", _pmax, "Pa", "pressure held after the ramp", minimum=0.0))
+        + _dynamics_parameters(1000.0, 1.0, 30.0),
+        _gripper(_kind)))
+    EXPERIMENTS[f"gripper_{_kind}"] = _gripper_experiment
+
+
+# ------------------------------------------------------------------------------------------
+# ball actuator
+def _ball_scene(params, with_loads):
+    R = params["R"]
+    meridian = sphere(R, params["nodes"])
+    n = meridian.nodes
+    scene = build_membrane(params, with_loads, meridian, [0, 1, 2 * (n - 1)], params["name"],
+                           probes={"top": lambda q: float(q[2 * n - 1])})
+    plate = Plane(kappa=params["kappa"], dhat=params["dhat"], z0=-R, nodes=tuple(range(1, n)))
+    ball = Ball(kappa=params["kappa"], dhat=params["dhat"], radius=params["rb"], z0=R + params["rb"] + params["drop"],
+                mass=params["mb"], gravity=params["g"])
+    return _with_contact(scene, plate, ball)
+
+
+def _inflated(scene: Scene, pressure: float, voltage: float) -> np.ndarray:
+    """The balloon's equilibrium on its plate at (pressure, voltage), without the ball, shape (2N,)."""
+    from .newton import equilibrium
+    keep = [t for t in scene.terms if not isinstance(t, (Ball, Plane))]
+    loads = {"pressure": pressure}
+    if "voltage" in scene.loads:
+        loads["voltage"] = voltage
+    eq = equilibrium(Scene(scene.meridian, scene.thickness, keep, fixed=scene.fixed, loads=scene.loads), loads)
+    if eq.converged:
+        plate = [t for t in scene.terms if isinstance(t, Plane)]
+        on_plate = Scene(scene.meridian, scene.thickness, keep + plate, fixed=scene.fixed, loads=scene.loads)
+        eq = solve(on_plate, loads, q0=eq.q, options=NewtonOptions(max_iterations=100))
+    if not eq.converged:
+        raise SnapmemError(f"no inflated equilibrium at pressure = {pressure:g} Pa: {eq.report.reason}")
+    return eq.q
+
+
+def _ball_drop_experiment(scene: Scene) -> Experiment:
+    p = scene.parameters
+    q_m = _inflated(scene, p["pressure"], scene.loads.get("voltage", 0.0))
+    top = q_m[-1]
+    q0 = np.concatenate([q_m, [top + p["rb"] + p["drop"]]])
+    loads = dict(scene.loads)
+    return Experiment(scene, lambda t: loads, p["t_end"], p["rho"], p["xi"], q0=q0, damp_bodies=p["damp_ball"] > 0,
+                      options=_options(p, dt=1e-4, dt_max=0.05))
+
+
+def resting(scene: Scene, pressure: float, voltage: float = 0.0) -> np.ndarray:
+    """Static equilibrium of the ball resting on the inflated balloon (ball scenes), shape (2N + 1,)."""
+    q_m = _inflated(scene, pressure, voltage)
+    ball = next(t for t in scene.terms if isinstance(t, Ball))
+    q = np.concatenate([q_m, [q_m[-1] + ball.radius + 0.5 * ball.dhat]])
+    loads = {"pressure": pressure}
+    if "voltage" in scene.loads:
+        loads["voltage"] = voltage
+    eq = solve(scene, loads, q0=q, options=NewtonOptions(max_iterations=200))
+    if not eq.converged:
+        raise SnapmemError(f"the ball found no rest on the balloon at {pressure:g} Pa: {eq.report.reason}")
+    return eq.q
+
+
+def _ball_throw_experiment(scene: Scene) -> Experiment:
+    p = scene.parameters
+    p0 = p["pressure"]
+    q0 = resting(scene, p0, scene.loads.get("voltage", 0.0))
+    loads = schedule(pressure=[(0.0, p0), (p["t_end"], p0 + p["rate"] * p["t_end"])])
+    return Experiment(scene, loads, p["t_end"], p["rho"], p["xi"], q0=q0, damp_bodies=p["damp_ball"] > 0,
+                      options=_options(p, dt=1e-3, dt_max=0.05))
+
+
+def _ball_parameters(name, t_end, drop):
+    return (_with_default(_common(61), H=1e-4)
+            + (Parameter("R", 0.1, "m", "balloon radius", minimum=0.0, open_min=True),
+               Parameter("name", name, "", "scene name", str))
+            + _with_default(material_parameters(eps=EPS), mu=MU_MR, pressure=500.0)
+            + _contact_parameters(1e4, 1e-3)
+            + (Parameter("rb", 0.05, "m", "ball radius", minimum=0.0, open_min=True),
+               Parameter("mb", 0.5, "kg", "ball mass", minimum=0.0, open_min=True),
+               Parameter("g", -10.0, "m/s^2", "gravity along z"),
+               Parameter("drop", drop, "m", "gap between ball and balloon top at the start", minimum=0.0,
+                         open_min=True),
+               Parameter("damp_ball", 1, "", "1: damping xi acts on the ball too; 0: it flies freely", int,
+                         minimum=0, maximum=1),
+               Parameter("rate", 100.0, "Pa/s", "pressure rate (ball_throw)"))
+            + _dynamics_parameters(1000.0, 1.0, t_end))
+
+
+register(SceneSpec("ball_drop", "ball dropped on a balloon held at 500 Pa on a plate (paper Fig. 8, case 1)",
+                   _ball_parameters("ball_drop", 5.0, 0.05), _ball_scene))
+register(SceneSpec("ball_throw", "balloon snaps through under rising pressure and throws the ball (paper Fig. 8, case 2)",
+                   _ball_parameters("ball_throw", 2.0, 0.001), _ball_scene))
+EXPERIMENTS["ball_drop"] = _ball_drop_experiment
+EXPERIMENTS["ball_throw"] = _ball_throw_experiment
+
+
+# ------------------------------------------------------------------------------------------
+# torus_snap: the default scene of the paper's C++ code
+def _torus_snap(params, with_loads):
+    meridian = torus(params["Rb"], params["Rs"], params["nodes"])
+    return build_membrane(params, with_loads, meridian, [1], "torus_snap",
+                          probes={"outer_radius": lambda q: float(q[0::2][: meridian.nodes].max())})
+
+
+def _torus_snap_experiment(scene: Scene) -> Experiment:
+    p = scene.parameters
+    loads = schedule(pressure=[(0.0, 0.0), (p["p_max"] / p["rate"], p["p_max"])])
+    return Experiment(scene, loads, p["t_end"], p["rho"], p["xi"], options=_options(p, dt=1e-3, dt_max=1.0))
+
+
+register(SceneSpec(
+    "torus_snap", "the paper's C++ default: torus Rs = 2 about Rb = 10 inflated to 200, snaps through",
+    _with_default(_common(200), H=0.1)
+    + (Parameter("Rb", 10.0, "", "axis to the centre of the cross-section", minimum=0.0, open_min=True),
+       Parameter("Rs", 2.0, "", "cross-section radius (< Rb)", minimum=0.0, open_min=True))
+    + _with_default(material_parameters(), mu=4225.0)
+    + (Parameter("rate", 100.0, "1/s", "pressure rate", minimum=0.0, open_min=True),
+       Parameter("p_max", 200.0, "", "pressure held after the ramp", minimum=0.0))
+    + _dynamics_parameters(100.0, 1.0, 100.0),
+    _torus_snap))
+EXPERIMENTS["torus_snap"] = _torus_snap_experiment
+
+ROBOTIC_SCENES = ("pump", "gripper_rod", "gripper_shell", "ball_drop", "ball_throw")
