@@ -210,6 +210,67 @@ def cmd_sweep(args) -> int:
     return 0
 
 
+def _progress_bar(stream=sys.stderr, width=40):
+    """A one-line progress display (simulated time, wall time) on ``stream``, redrawn at most 10x a second."""
+    import time
+    start = time.perf_counter()
+    state = {"last": -1.0}
+
+    def show(t, t_end):
+        now = time.perf_counter()
+        if now - state["last"] < 0.1 and t < t_end:
+            return
+        state["last"] = now
+        frac = min(1.0, t / t_end) if t_end > 0 else 1.0
+        bar = "#" * int(width * frac) + "-" * (width - int(width * frac))
+        stream.write(f"\r[{bar}] t = {t:9.4f} / {t_end:g} s  wall {now - start:6.1f} s")
+        if t >= t_end:
+            stream.write("\n")
+        stream.flush()
+    return show
+
+
+def cmd_simulate(args) -> int:
+    import dataclasses
+    import numpy as np
+    from .robots import experiment
+    from .dynamics import simulate
+    params = parse_sets(args.set)
+    ex = experiment(args.scene, **params)
+    t_end = ex.t_end if args.t_end is None else float(args.t_end)
+    changes = {k: v for k, v in (("scheme", args.scheme), ("tol", args.tol)) if v is not None}
+    if args.frames:
+        changes["save_interval"] = t_end / args.frames
+    options = dataclasses.replace(ex.options, **changes)
+    traj = simulate(ex.scene, ex.loads, t_end, rho=ex.rho, damping=ex.damping, q0=ex.q0, v0=ex.v0,
+                    options=options, damp_bodies=ex.damp_bodies,
+                    progress=None if args.quiet else _progress_bar())
+    meta = traj.meta
+    wall = meta["wall_time"]
+    lines = {"scene": args.scene, "scheme": meta["scheme"], "t_end": meta["t_end"], "steps": meta["steps"],
+             "rejected": meta["rejected"], "newton_iterations": meta["newton_iterations"], "wall_time": wall,
+             "real_time_factor": meta["t_end"] / wall if wall > 0 else float("inf"),
+             "volume": float(traj["volume"][-1]), "min_gap": float(np.min(traj["min_gap"]))}
+    for key in traj.data:
+        if key.endswith(("_force", "_z")):
+            lines[f"final_{key}"] = float(traj[key][-1])
+    for name, value in lines.items():
+        print(f"{name}: {value:.6g}" if isinstance(value, float) else f"{name}: {value}")
+    if args.out:
+        traj.save(args.out)
+        print(f"saved: {args.out}")
+    return 0
+
+
+def cmd_replay(args) -> int:
+    from .dynamics import Trajectory
+    from .replay import animate
+    traj = Trajectory.load(args.trajectory)
+    out = animate(traj, args.out, frames=args.frames, fps=args.fps)
+    print(f"wrote: {out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="snapmem", description="Snap-through of axisymmetric dielectric-elastomer membranes.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -267,6 +328,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="FOLD.csv")
     p.add_argument("--plot", metavar="FIG.png")
     p.set_defaults(func=cmd_fold)
+
+    p = sub.add_parser("simulate", help="simulate a scene in time with its schedule (dynamics, contact)")
+    p.add_argument("scene")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
+    p.add_argument("--t-end", type=float, help="end time [s] (default: the scene's)")
+    p.add_argument("--scheme", choices=["midpoint", "bdf2", "euler"], help="time integrator")
+    p.add_argument("--tol", type=float, help="local error tolerance per step (fraction of the size)")
+    p.add_argument("--frames", type=int, default=0, help="save about this many frames (default: every step)")
+    p.add_argument("--out", metavar="TRAJ.npz", help="save the trajectory (compressed, no pickle)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("replay", help="animate a saved trajectory to .gif or .mp4")
+    p.add_argument("trajectory", metavar="TRAJ.npz")
+    p.add_argument("--out", required=True, metavar="FILE.gif|FILE.mp4")
+    p.add_argument("--frames", type=int, default=120)
+    p.add_argument("--fps", type=int, default=20)
+    p.set_defaults(func=cmd_replay)
     return parser
 
 
