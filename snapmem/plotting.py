@@ -88,3 +88,23 @@ def plot_xy(table: pd.DataFrame, x: str, y: str, path, group: str | None = None,
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def plot_family(table: pd.DataFrame, x: str, y: str, group: str, path, exact=None, title: str | None = None,
+                xlabel: str | None = None, ylabel: str | None = None):
+    """One branch per value of ``group`` (stable solid, unstable dashed, critical points marked).
+
+    ``exact`` maps a group value to (xs, ys) of a reference curve drawn thin and black.
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for key, sub in table.groupby(group, sort=True):
+        plot_branch(sub, x, y, ax=ax, label=f"{group} = {key:g}",
+                    exact=None if exact is None else exact(key))
+    ax.set_xlabel(xlabel or x)
+    ax.set_ylabel(ylabel or y)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
