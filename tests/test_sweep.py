@@ -169,3 +169,50 @@ def test_progress_shows_rate_and_time_left():
     text = bar.text()
     assert text.startswith("sweep 4/10 [#########") and "designs/s" in text and "left" in text
     assert "1 timeout" in text
+
+
+def readme_block(start):
+    """The README's fenced code block whose first line starts with ``start``."""
+    text = (ROOT / "README.md").read_text()
+    for block in text.split("```")[1::2]:
+        body = block.split("\n", 1)[1]
+        if body.lstrip().startswith(start):
+            return body
+    raise AssertionError(f"no README block starts with {start!r}")
+
+
+def test_readme_sweep_command(tmp_path, monkeypatch, capsys):
+    from snapmem import exact
+    import shlex
+    monkeypatch.chdir(tmp_path)
+    argv = shlex.split(readme_block("snapmem sweep").strip())
+    assert main([*argv[1:], "--quiet"]) == 0
+    table = read_rows(tmp_path / "rows.csv")
+    assert len(table) == 6 and set(table["status"]) == {"converged"}
+    row = table[(table["pressure"] == 0.012) & (table["E_hat"] == 0.1538)].iloc[0]
+    assert row["stretch"] == pytest.approx(exact.balloon_stretch(0.012, E_hat=0.1538), rel=1e-3)
+    assert "rows.csv: 6 rows; converged 6" in capsys.readouterr().out
+
+
+def test_readme_sweep_python(tmp_path):
+    code = readme_block("from snapmem.sweep")
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    table = read_rows(tmp_path / "rows.csv")
+    assert len(table) == 6 and set(table["status"]) == {"converged"}
+    assert table["stretch"].between(1.0, 1.6).all()
+
+
+def test_soak_study_runs_on_a_few_designs(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    run = subprocess.run([sys.executable, str(ROOT / "studies" / "soak.py"), "--count", "12", "--workers", "2",
+                          "--timeout", "60", "--out", str(tmp_path / "soak.csv")],
+                         env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    table = read_rows(tmp_path / "soak.csv")
+    assert len(table) == 12 and table["i"].tolist() == list(range(12))
+    assert run.stdout.strip().startswith("12 rows:")
+    assert set(table["status"]) <= {"converged", "no_equilibrium", "max_iterations", "step_too_small",
+                                    "left_domain", "singular", "not_finite", "failed", "invalid", "error", "timeout"}
