@@ -615,7 +615,7 @@ def check_scheduler(scheduler):
 
 def sweep(function: Callable[[dict], Mapping], grid, out, workers: int | None = None,
           scheduler: str | None = None, timeout: float | None = None, progress: bool = True,
-          columns: Sequence[str] | None = None):
+          columns: Sequence[str] | None = None, meta: Mapping | None = None):
     """Run ``function`` on every design of ``grid`` and append one row per design to ``out``.
 
     Parameters
@@ -639,6 +639,10 @@ def sweep(function: Callable[[dict], Mapping], grid, out, workers: int | None = 
     columns : sequence of str, optional
         Output column names (default ``function.columns`` if it has them, else the outputs of
         the first design that succeeds).
+    meta : mapping, optional
+        What the rows depend on besides the design (default ``function.meta``, else the
+        function's name), kept in ``<out>.sweep.json``: resuming with different ``meta`` (another
+        job, other fixed parameters) is refused instead of mixing rows of two sweeps.
 
     Returns
     -------
@@ -670,8 +674,15 @@ def sweep(function: Callable[[dict], Mapping], grid, out, workers: int | None = 
         if clash:
             raise SnapmemError(f"columns: {sorted(clash)} clash with the design's parameters or the sweep's columns")
 
+    if meta is None:
+        meta = getattr(function, "meta", None)
+    if meta is None:
+        meta = {"function": f"{getattr(function, '__module__', '?')}.{getattr(function, '__qualname__', repr(function))}"}
+    meta = json.loads(json.dumps(dict(meta), sort_keys=True, default=str))
+
     rows = _RowFile(out, names)
     try:
+        _check_meta(rows.path, meta, fresh=rows.outputs is None and not rows.done)
         if rows.outputs is None and columns is not None:
             rows.start(columns)
         elif columns is not None and rows.outputs != columns:
@@ -709,6 +720,30 @@ def sweep(function: Callable[[dict], Mapping], grid, out, workers: int | None = 
     return read_rows(out)
 
 
+def _check_meta(path: str, meta: dict, fresh: bool):
+    """Write ``meta`` beside a new sweep file; refuse to resume one whose meta differs."""
+    side = os.path.splitext(path)[0] + ".sweep.json"
+    if not fresh and os.path.exists(side):
+        try:
+            with open(side, encoding="utf-8") as f:
+                old = json.load(f)
+        except (OSError, ValueError):
+            old = None
+        if old is not None and old != meta:
+            changed = sorted(k for k in set(old) | set(meta) if old.get(k) != meta.get(k))
+            raise SnapmemError(f"out = {path!r}: was written with {', '.join(f'{k} = {old.get(k)!r}' for k in changed)}; "
+                               f"this sweep has {', '.join(f'{k} = {meta.get(k)!r}' for k in changed)}: "
+                               "resume with the same settings or choose a new file")
+        if old is not None:
+            return
+    tmp = side + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        json.dump(meta, f, indent=1, sort_keys=True)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, side)
+
+
 def read_rows(path):
     """A sweep's CSV as a pandas DataFrame (parameters and outputs typed, empty cells NaN)."""
     import pandas as pd
@@ -730,6 +765,11 @@ class EquilibriumJob:
 
     scene: str
     fixed: dict = field(default_factory=dict)
+
+    @property
+    def meta(self) -> dict:
+        """What the rows depend on besides the design (kept beside the CSV, checked on resume)."""
+        return {"job": "equilibrium", "scene": self.scene, "fixed": {k: str(v) for k, v in sorted(self.fixed.items())}}
 
     REPORT = ("converged", "iterations", "residual_norm", "reason")
 

@@ -216,3 +216,13 @@ def test_soak_study_runs_on_a_few_designs(tmp_path):
     assert run.stdout.strip().startswith("12 rows:")
     assert set(table["status"]) <= {"converged", "no_equilibrium", "max_iterations", "step_too_small",
                                     "left_domain", "singular", "not_finite", "failed", "invalid", "error", "timeout"}
+
+
+def test_resume_refuses_other_fixed_parameters(tmp_path, capsys):
+    out = tmp_path / "rows.csv"
+    args = ["sweep", "balloon", "--grid", "pressure=0.004,0.008", "--out", str(out), "--quiet", "--workers", "1"]
+    assert main([*args, "--set", "nodes=11"]) == 0
+    assert main([*args, "--set", "nodes=13"]) == 2
+    err = capsys.readouterr().err
+    assert "was written with fixed = {'nodes': '11'}" in err and "{'nodes': '13'}" in err
+    assert main([*args, "--set", "nodes=11"]) == 0                    # the same settings resume
