@@ -190,14 +190,8 @@ class Branch:
 
 def load_points(path) -> dict:
     """Read a branch file written by :meth:`Branch.save` (no pickle); returns its arrays and meta."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            out = {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError) as exc:
-        raise SnapmemError(f"branch file {str(path)!r}: cannot be read ({exc})") from None
-    for key in ("x", "lam", "meta"):
-        if key not in out:
-            raise SnapmemError(f"branch file {str(path)!r}: has no {key!r} array; not a snapmem branch")
+    from .errors import read_npz
+    out = read_npz(path, "branch file", required=("x", "lam", "meta"))
     out["meta"] = json.loads(str(out["meta"]))
     return out
 

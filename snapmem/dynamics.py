@@ -223,9 +223,9 @@ class Trajectory:
 
     @classmethod
     def load(cls, path) -> "Trajectory":
-        with np.load(path, allow_pickle=False) as f:
-            data = {k: f[k] for k in f.files if k != "meta"}
-            meta = json.loads(str(f["meta"])) if "meta" in f.files else {}
+        from .errors import read_npz                     # corrupt or truncated: one clear error
+        data = read_npz(path, "trajectory file", required=("t", "r", "z"))
+        meta = json.loads(str(data.pop("meta"))) if "meta" in data else {}
         return cls(data, meta)
 
     def snap_time(self, key: str = "volume") -> float:
@@ -254,8 +254,11 @@ class _Stepper:
         self.free = scene.free
         self.tol = options.newton.tol * scene.force_scale
 
-    def solve(self, q, v, h, loads):
-        """y minimising the incremental potential of step h from (q, v); (y, report)."""
+    def solve(self, q, v, h, loads, current=None):
+        """y minimising the incremental potential of step h from (q, v); (y, report).
+
+        Newton starts from the predictor q + h v if it is admissible, else from ``current`` (the
+        present state, always admissible; default q)."""
         scene, free = self.scene, self.free
         coef = self.mass / h ** 2 + self.damping / h
         inertia_free = coef[free]
@@ -273,7 +276,7 @@ class _Stepper:
 
         guess = q + h * v
         if scene.inadmissible(guess) is not None:
-            guess = q
+            guess = q if current is None else current
         # the inertia term's rounding floor, eps |q| M / h^2, grows as h falls: keep the tolerance above it
         tol = max(self.tol, 1e3 * np.finfo(float).eps * float(np.max(inertia_free)) * self.scene.meridian.size)
         y, _ev, report = newton(assemble, guess, free, tol, self.options.newton,
@@ -312,7 +315,9 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     Returns
     -------
     Trajectory
-        Raises SolverError if the step falls below ``dt_min``.
+        ``meta['status']`` is 'completed', or why the run ended early (the step fell below
+        ``dt_min``, e.g. where a slack membrane crumples, or ``max_steps``); the frames up to
+        there are kept.
     """
     wall = time.perf_counter()
     t_end = check_real("t_end", t_end)
@@ -346,12 +351,14 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)
     steps = rejected = iterations = fallbacks = 0
     history = None                                     # (q_{n-1}, v_{n-1}, dt_{n-1}) for BDF2
+    status = "completed"
     p = options.order
     length = scene.meridian.size
     breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
     while t < t_end - 1e-12 * max(1.0, abs(t_end)):
         if steps + rejected >= options.max_steps:
-            raise SolverError(f"max_steps = {options.max_steps} reached at t = {t:.6g} s")
+            status = f"max_steps = {options.max_steps} reached at t = {t:.6g} s"
+            break
         dt = min(dt, t_end - t)
         upcoming = [b for b in breaks if t + 1e-12 < b < t + dt]
         if upcoming:                                  # land on schedule kinks
@@ -366,7 +373,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             h = dt / a0
             x_hat = -(a1 * q + a2 * history[0]) / a0
             v_hat = -(a1 * v + a2 * history[1]) / a0
-            y, report = stepper.solve(x_hat, v_hat, h, loads_at(t + dt))
+            y, report = stepper.solve(x_hat, v_hat, h, loads_at(t + dt), current=q)
         else:
             h = dt / 2 if options.scheme == "midpoint" else dt
             y, report = stepper.solve(q, v, h, loads_at(t + h))
@@ -376,8 +383,8 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             dt *= 0.25
             log.debug("t = %.6g: Newton failed (%s); dt -> %.3g", t, report.reason, dt)
             if dt < options.dt_min:
-                raise SolverError(f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
-                                  f"(Newton: {report.reason})")
+                status = f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s (Newton: {report.reason})"
+                break
             continue
         order = p
         if bdf2:
@@ -396,8 +403,9 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                     rejected += 1
                     dt *= 0.25
                     if dt < options.dt_min:
-                        raise SolverError(f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
-                                          f"(Newton: {report_euler.reason})")
+                        status = (f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
+                                  f"(Newton: {report_euler.reason})")
+                        break
                     continue
                 q_new, v_new, order = y, (y - q) / dt, 1
                 report.iterations += report_euler.iterations
@@ -433,7 +441,12 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             if report.iterations > 6:
                 grow = min(grow, 1.0)
             dt = min(options.dt_max, max(options.dt_min, dt * grow))
-    meta = {"scene": scene.name, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
+    if status != "completed":
+        log.warning("simulation stopped early: %s", status)
+        recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)
+    elif stop is not None and t < t_end - 1e-12 * max(1.0, abs(t_end)):
+        status = "stopped by the stop condition"
+    meta = {"scene": scene.name, "status": status, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
             "damping": xi, "steps": steps, "rejected": rejected, "euler_fallbacks": fallbacks, "newton_iterations": iterations,
             "wall_time": time.perf_counter() - wall, "t0": t0, "t_end": float(t),
             "nodes": scene.meridian.nodes, "closed": scene.meridian.closed,

@@ -75,6 +75,30 @@ def check_array(name: str, value, shape: tuple) -> "np.ndarray":
     return array
 
 
+def read_npz(path, what: str, required: tuple = ()) -> dict:
+    """The arrays of a .npz file written by snapmem, loaded without pickle.
+
+    A missing, truncated or corrupt file, one with object (pickled) arrays, or one without the
+    ``required`` arrays is a SnapmemError naming the file and what is wrong, never a traceback.
+    """
+    import zipfile
+    import zlib
+
+    import numpy as np
+    try:
+        data = np.load(path, allow_pickle=False)
+        if not isinstance(data, np.lib.npyio.NpzFile):
+            raise ValueError("a single .npy array, not an .npz archive")
+        with data:
+            out = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+        raise SnapmemError(f"{what} {str(path)!r}: cannot be read ({exc})") from None
+    for key in required:
+        if key not in out:
+            raise SnapmemError(f"{what} {str(path)!r}: has no {key!r} array; not a snapmem {what.split()[0]}")
+    return out
+
+
 def _short(value) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."

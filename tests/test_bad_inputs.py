@@ -15,6 +15,8 @@ import pytest
 from snapmem import Meridian, NewtonOptions, SnapmemError, build_scene, equilibrium, solve
 from snapmem.cli import main, parse_sets
 from snapmem.materials import Gent, MooneyRivlin
+from snapmem.continuation import load_points
+from snapmem.dynamics import Trajectory
 from snapmem.sweep import make_job, parse_axis, sweep
 
 NAN, INF = float("nan"), float("inf")
@@ -26,6 +28,23 @@ def eq(scene, **params):
 
 def solve_with(**kw):
     return lambda: solve(build_scene("balloon", nodes=11), **kw)
+
+
+def write_files():
+    """Broken files in the current folder: truncated, not a zip, empty, pickled objects, foreign."""
+    np.savez_compressed("good.npz", x=np.ones(50))
+    data = open("good.npz", "rb").read()
+    open("truncated.npz", "wb").write(data[: len(data) // 2])
+    open("text.npz", "w").write("hello\n")
+    open("empty.npz", "wb").close()
+    np.savez("objects.npz", x=np.array([{"a": 1}], dtype=object))
+
+
+def load(reader, name):
+    def call():
+        write_files()
+        return reader(name)
+    return call
 
 
 def past_gent_lock():
@@ -100,6 +119,22 @@ ERRORS = [
      ["scheduler = 'udp://x:1'", "tcp://HOST:PORT"]),
     ("out folder missing", lambda: sweep(dict, {"a": [1]}, "no/such/x.csv"),
      ["sweep", "balloon", "--grid", "H=0.2", "--out", "no/such/x.csv"], ["out = 'no/such/x.csv'", "does not exist"]),
+    ("branch truncated", load(load_points, "truncated.npz"), ["trace", "balloon", "--restart", "truncated.npz"],
+     ["branch file 'truncated.npz': cannot be read", "not a zip file"]),
+    ("branch not a zip", load(load_points, "text.npz"), ["trace", "balloon", "--restart", "text.npz"],
+     ["branch file 'text.npz': cannot be read"]),
+    ("branch empty", load(load_points, "empty.npz"), ["trace", "balloon", "--restart", "empty.npz"],
+     ["branch file 'empty.npz': cannot be read"]),
+    ("branch missing", load(load_points, "nothing.npz"), ["trace", "balloon", "--restart", "nothing.npz"],
+     ["branch file 'nothing.npz': cannot be read", "No such file"]),
+    ("branch of another program", load(load_points, "good.npz"), ["trace", "balloon", "--restart", "good.npz"],
+     ["branch file 'good.npz': has no 'lam' array", "not a snapmem branch"]),
+    ("trajectory truncated", load(Trajectory.load, "truncated.npz"), ["replay", "truncated.npz", "--out", "a.gif"],
+     ["trajectory file 'truncated.npz': cannot be read", "not a zip file"]),
+    ("trajectory with pickled objects", load(Trajectory.load, "objects.npz"), ["replay", "objects.npz", "--out", "a.gif"],
+     ["trajectory file 'objects.npz': cannot be read", "allow_pickle=False"]),
+    ("trajectory of another program", load(Trajectory.load, "good.npz"), ["replay", "good.npz", "--out", "a.gif"],
+     ["trajectory file 'good.npz': has no 't' array", "not a snapmem trajectory"]),
     # API only: inputs that have no command-line form
     ("meridian self-intersecting", lambda: Meridian([1.0, 2.0, 2.0, 1.0], [0.0, 1.0, 0.0, 1.0]), None,
      ["meridian is self-intersecting", "edges 0 and 2 cross"]),
@@ -157,6 +192,7 @@ def test_api_raises_one_clear_error(name, call, argv, words, tmp_path, monkeypat
                          ids=[row[0] for row in ERRORS if row[2] is not None])
 def test_cli_prints_one_line_and_exits_2(name, call, argv, words, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    write_files()
     assert main(argv) == 2
     captured = capsys.readouterr()
     err = captured.err.strip()
