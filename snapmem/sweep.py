@@ -515,11 +515,17 @@ def _run_pool(function, tasks, workers: int, timeout: float | None):
         pool.append(start())
     try:
         while True:
-            for worker in pool:
+            for i, worker in enumerate(pool):
                 if worker.task is None and pending:
+                    if not worker.process.is_alive():            # died after its last result
+                        stop(worker)
+                        pool[i] = worker = start()
                     worker.task = pending.popleft()
                     worker.started = time.monotonic()
-                    worker.conn.send(worker.task)
+                    try:
+                        worker.conn.send(worker.task)
+                    except OSError:                              # seen as dead just below
+                        pass
             busy = [w for w in pool if w.task is not None]
             if not busy:
                 break
