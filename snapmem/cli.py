@@ -247,7 +247,8 @@ def cmd_simulate(args) -> int:
                     progress=None if args.quiet else _progress_bar())
     meta = traj.meta
     wall = meta["wall_time"]
-    lines = {"scene": args.scene, "scheme": meta["scheme"], "t_end": meta["t_end"], "steps": meta["steps"],
+    lines = {"scene": args.scene, "status": meta["status"], "scheme": meta["scheme"], "t_end": meta["t_end"],
+             "steps": meta["steps"],
              "rejected": meta["rejected"], "newton_iterations": meta["newton_iterations"], "wall_time": wall,
              "real_time_factor": meta["t_end"] / wall if wall > 0 else float("inf"),
              "volume": float(traj["volume"][-1]), "min_gap": float(np.min(traj["min_gap"]))}
@@ -259,7 +260,7 @@ def cmd_simulate(args) -> int:
     if args.out:
         traj.save(args.out)
         print(f"saved: {args.out}")
-    return 0
+    return 0 if meta["status"] == "completed" else 1
 
 
 def cmd_replay(args) -> int:
