@@ -128,7 +128,9 @@ def _contact_parameters(kappa, dhat):
 
 
 def _options(params, **extra) -> DynamicsOptions:
-    return DynamicsOptions(**{"scheme": "bdf2", "tol": params["tol"], **extra})
+    """BDF2 at the scene's tolerance, about 2000 frames recorded (the smallest gap of every step is kept)."""
+    return DynamicsOptions(**{"scheme": "bdf2", "tol": params["tol"], "save_interval": params["t_end"] / 2000,
+                              **extra})
 
 
 # ------------------------------------------------------------------------------------------
@@ -340,3 +342,30 @@ register(SceneSpec(
 EXPERIMENTS["torus_snap"] = _torus_snap_experiment
 
 ROBOTIC_SCENES = ("pump", "gripper_rod", "gripper_shell", "ball_drop", "ball_throw")
+
+
+def events(traj: Trajectory) -> dict:
+    """The events of a robotic run that its accuracy is judged by, by scene.
+
+    ``snap`` (time of the fastest volume change [s]) for every scene; the pump adds ``snap_back``
+    (fastest fall after the voltage is off); ball scenes add ``ball_top`` (highest ball height after
+    the start [m]) and ``ball_final`` [m]; torus_snap adds ``outer_radius`` (final).
+    """
+    t, volume = traj["t"], traj["volume"]
+    rate = np.diff(volume) / np.maximum(np.diff(t), 1e-300)
+    mid = 0.5 * (t[:-1] + t[1:])
+    out = {}
+    name = traj.meta.get("scene", "")
+    if name == "pump":
+        t_down = traj.meta["parameters"]["t_down"]
+        up = mid < t_down
+        out["snap"] = float(mid[up][np.argmax(rate[up])])
+        out["snap_back"] = float(mid[~up][np.argmin(rate[~up])]) if np.any(~up) else float("nan")
+    else:
+        out["snap"] = float(mid[np.argmax(np.abs(rate))])
+    if "ball_z" in traj.data:
+        out["ball_top"] = float(traj["ball_z"][1:].max())
+        out["ball_final"] = float(traj["ball_z"][-1])
+    if name == "torus_snap":
+        out["outer_radius"] = float(traj["r"][-1].max())
+    return out
