@@ -354,20 +354,28 @@ class PlateODE(_Shooter):
             raise SolverError(f"plate at p = {p:g}: shooting on the apex stretch did not converge")
         return self.solution(float(sol.root), p)
 
-    def trace(self, lam0_values) -> list[MeridianSolution]:
-        """The branch at the given apex stretches (ascending, > 1), continuation in lam0."""
-        out, ps, ls = [], [], []
+    def branch(self, lam0_values, options=None) -> list[tuple[float, float, float]]:
+        """States (lam0, p, deflection) at the given apex stretches (ascending, > 1).
+
+        Continuation in lam0: each pressure starts from the secant prediction of the two before
+        it. The deflection [m] comes from one more (non-dense) shot at the converged pressure.
+        """
+        out = []
         for lam0 in np.asarray(lam0_values, dtype=float):
             guess = None
-            if len(ps) >= 2:                                     # secant predictor in lam0
-                guess = ps[-1] + (ps[-1] - ps[-2]) * (lam0 - ls[-1]) / (ls[-1] - ls[-2])
-            elif ps:
-                guess = ps[-1] * (lam0 - 1.0) / (ls[-1] - 1.0)
-            p = self.pressure(lam0, guess)
-            ps.append(p)
-            ls.append(lam0)
-            out.append(self.solution(lam0, p))
+            if len(out) >= 2:
+                (l1, p1, _), (l2, p2, _) = out[-2:]
+                guess = p2 + (p2 - p1) * (lam0 - l2) / (l2 - l1)
+            elif out:
+                guess = out[-1][1] * (lam0 - 1.0) / (out[-1][0] - 1.0)
+            p = self.pressure(lam0, guess, options)
+            sol = self.shoot(lam0, p, options=options)
+            out.append((float(lam0), p, float(-sol.y[1, -1])))
         return out
+
+    def trace(self, lam0_values) -> list[MeridianSolution]:
+        """Sampled solutions at the given apex stretches (ascending, > 1), continuation in lam0."""
+        return [self.solution(lam0, p) for lam0, p, _ in self.branch(lam0_values)]
 
 
 # ------------------------------------------------------------------------------------------
