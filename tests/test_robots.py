@@ -79,3 +79,28 @@ def test_cli_simulate_and_replay(tmp_path, capsys):
     gif = tmp_path / "traj.gif"
     assert main(["replay", str(out), "--out", str(gif), "--frames", "6"]) == 0
     assert gif.stat().st_size > 1000
+
+
+def _study(name):
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "studies" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_bench_robots_quick_runs_and_converges(tmp_path):
+    table = _study("bench_robots").main(["--quick", "--scenes", "torus_snap", "gripper_rod",
+                                         "--out", str(tmp_path / "bench.csv")])
+    row = table.set_index("scene").loc["torus_snap"]
+    assert row["converged_1pct"] and row["real_time_factor"] > 50
+    assert (tmp_path / "bench.csv.json").exists()
+
+
+def test_robot_curves_quick_pump_limit_points(tmp_path):
+    """At 300 V the pump's limit pressure is below the unactuated one (voltage softens)."""
+    limits = _study("robot_curves").main(["--quick", "--only", "pump", "--out", str(tmp_path)])["pump"]
+    first = limits[limits["kind"] == "LP"].groupby("phi")["pressure"].first()
+    assert 70 < first[300.0] < first[0.0] < 95
