@@ -41,14 +41,18 @@ def gripper(out, nodes, quick):
     rows, summary = [], []
     for name, rw, phi in cases:
         scene = build_scene(name, nodes=nodes, Rw=rw, voltage=phi)
-        branch = trace(scene, "pressure", until={"pressure": 2500.0}, options=ContinuationOptions(max_steps=800))
+        # shells: volume control passes the free torus's pressure maximum without a jump (pressure
+        # control stalls past it there); rods: pressure control (under volume control the outer
+        # side balloons and the steps become tiny)
+        control = "pressure" if name == "gripper_rod" else "volume"
+        branch = trace(scene, control, until={"pressure": 2500.0}, options=ContinuationOptions(max_steps=800))
         key = "rod_force" if name == "gripper_rod" else "shell_force"
         table = branch.table.assign(scene=name, Rw=rw, phi=phi, force=branch.table[key])
         rows.append(table[["scene", "Rw", "phi", "pressure", "force", "stable", "min_tension", "volume"]])
-        lp = branch.points[branch.points["kind"] == "LP"]
         touch = table[table["force"] > 0]
+        free = table if touch.empty else table.loc[: touch.index[0]]
         summary.append({"scene": name, "Rw": rw, "phi": phi,
-                        "free_limit_pressure": float(lp["control"].iloc[0]) if len(lp) else np.nan,
+                        "free_limit_pressure": float(free["pressure"].max()) if free["pressure"].idxmax() < free.index[-1] else np.nan,
                         "contact_from_pressure": float(touch["pressure"].iloc[0]) if len(touch) else np.nan,
                         "force_at_end": float(table["force"].iloc[-1]), "pressure_at_end": float(table["pressure"].iloc[-1]),
                         "status": branch.status})
