@@ -241,10 +241,11 @@ class LoadProblem:
     def lam_of(self, loads) -> float:
         return loads[self.load] / self.factor
 
-    def evaluate(self, x, lam, order=2):
+    def evaluate(self, x, lam, order=2, with_floor=False):
+        """(residual, Jacobian) at (x, lam); with ``with_floor`` also the residual's rounding floor."""
         q, loads = self.state(x, lam)
         ev = self.scene.evaluate(q, loads, order)
-        return ev.residual, ev.stiffness
+        return (ev.residual, ev.stiffness, ev.residual_floor) if with_floor else (ev.residual, ev.stiffness)
 
     def dF_dlam(self, x, lam):
         q, loads = self.state(x, lam)
@@ -300,13 +301,13 @@ class VolumeProblem(LoadProblem):
     def lam_of(self, loads) -> float:
         raise SnapmemError("volume control: the volume is an output; start from a state")
 
-    def evaluate(self, x, lam, order=2):
+    def evaluate(self, x, lam, order=2, with_floor=False):
         q, loads = self.state(x, lam)
         ev = self.scene.evaluate(q, loads, order)
         g = -self.scene.load_derivative(q, "pressure", loads)                     # grad V (free)
         F = np.append(ev.residual, self.scene.volume(q) - lam)
         J = None if order < 2 else BorderedMatrix(ev.stiffness, -g, g, [[0.0]])
-        return F, J
+        return (F, J, ev.residual_floor) if with_floor else (F, J)
 
     def dF_dlam(self, x, lam):
         d = np.zeros(self.n)
@@ -373,17 +374,22 @@ class _Tracer:
         x = base.x + s * t[:-1]
         lam = base.lam + s * t[-1]
         row, corner = self.wx * t[:-1], [[self.wl * t[-1]]]
+        last_step = np.inf
         for it in range(self.opt.max_corrector_iterations + 1):
             why = self.pb.inadmissible(x, lam)
             if why is not None:
                 return None, f"left the model's domain ({why})"
-            F, J = self.pb.evaluate(x, lam)
+            F, J, floor = self.pb.evaluate(x, lam, with_floor=True)
             self.evaluations += 1
             g = self.inner(t, np.append(x - base.x, lam - base.lam)) - s
             norm = float(np.max(np.abs(F)))
             if not np.isfinite(norm):
                 return None, "residual not finite"
-            if norm <= self.tol and abs(g) <= 1e-12 * max(abs(s), 1e-300) + 1e-14:
+            tol = max(self.tol, floor)
+            # at the rounding floor of a stiff state (a law near its lock): the last step was at
+            # the rounding of x and the residual is within 1e3 of the tolerance
+            at_rounding = last_step <= 1e-10 * np.max(np.abs(x)) and norm <= 1e3 * tol
+            if (norm <= tol or at_rounding) and abs(g) <= 1e-12 * max(abs(s), 1e-300) + 1e-14:
                 return Point(x, lam, iterations=it), J
             if it == self.opt.max_corrector_iterations:
                 return None, f"corrector did not converge in {it} iterations (|R| = {norm:.2e})"
@@ -394,6 +400,7 @@ class _Tracer:
             d = lu.solve(-np.append(F, g))
             self.newton_iterations += 1
             x, lam = x + d[:-1], lam + d[-1]
+            last_step = float(np.max(np.abs(d[:-1])))
         return None, "corrector failed"
 
     def finish(self, p: Point, J, previous: Point | None, tangent: bool = True, precise: bool = False):
@@ -479,10 +486,10 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
         if reason is not None:
             rejections.append({"step": step, "s": base.s, "ds": ds, "reason": reason})
             log.info("step %d cut (ds = %.3g): %s", step, ds, reason)
-            ds *= 0.5
-            if ds < options.ds_min:
-                status = f"step too small (ds < {options.ds_min:g}) after: {reason}"
+            if ds <= options.ds_min:
+                status = f"step too small (ds = {options.ds_min:g}) after: {reason}"
                 break
+            ds = max(0.5 * ds, options.ds_min)
             continue
         # a critical point between base and p?
         new_critical = []
@@ -584,7 +591,7 @@ def _locate_value(tracer, base: Point, p: Point, f, kind: str, known: dict | Non
     ds = p.s - base.s
     try:
         s = brentq(g, 0.0, ds, xtol=1e-13 * ds, rtol=4 * np.finfo(float).eps, maxiter=60)
-    except (SolverError, ValueError) as exc:
+    except (SolverError, ValueError, RuntimeError) as exc:      # RuntimeError: Brent's iteration limit
         log.warning("could not locate %s point: %s", kind, exc)
         return None
     pt = tracer.point_at(_with_vectors(base, last[0]), s)[0]

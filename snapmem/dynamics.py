@@ -272,7 +272,7 @@ class _Stepper:
                 K.add_diagonal(inertia_free)
             else:
                 K.ab[2 * K.b] += inertia_free
-            return Evaluation(ev.energy, ev.gradient, residual, K)
+            return Evaluation(ev.energy, ev.gradient, residual, K, ev.residual_floor)
 
         guess = q + h * v
         if scene.inadmissible(guess) is not None:

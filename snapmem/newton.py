@@ -140,10 +140,15 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
                                      f"left the model's domain: the starting state is outside it ({why})")
     ev = residual_and_jacobian(q)
     norm = _norm(ev.residual)
+    last_step = np.inf
     report = NewtonReport(False, 0, norm, "max iterations")
     for _ in range(options.max_iterations):
         report.history.append(norm)
-        if norm <= tol:
+        floor_tol = max(tol, ev.residual_floor)
+        if norm <= floor_tol or (last_step <= 1e-10 * np.max(np.abs(q)) and norm <= 1e3 * floor_tol):
+            # converged; or the last Newton step was at the rounding of q and the residual is within
+            # 1e3 of the tolerance: the rounding floor of a stiff state (a law near its lock). A
+            # slowly converging singular problem takes steps far larger than that.
             report.converged, report.reason = True, "converged"
             break
         if not np.isfinite(norm):
@@ -176,8 +181,9 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
             break
         q, ev = trial, ev_trial
         norm = _norm(ev.residual)
+        last_step = alpha * float(np.max(np.abs(dx)))
     report.residual_norm = norm
-    if not report.converged and norm <= tol:
+    if not report.converged and norm <= max(tol, ev.residual_floor):
         report.converged, report.reason = True, "converged"
     return q, ev, report
 
@@ -317,7 +323,3 @@ def _snap_by_tracing(scene, last: Equilibrium, name, value):
     eq = solve(scene, loads, q0=q)
     eq.report.iterations += branch.stats["newton_iterations"]
     return eq if eq.converged else None
-
-
-def _is_stable(eq: Equilibrium) -> bool:
-    return eq.stiffness is not None and eq.stiffness.smallest_eigenvalues(1)[0] > 0

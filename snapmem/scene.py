@@ -42,12 +42,17 @@ class Evaluation:
     stiffness : BandedMatrix, BodyMatrix or None
         K = d2Pi/dq2 on the free degrees of freedom, in band order [N/m] (bordered by one dense
         row and column per rigid body when the scene has bodies).
+    residual_floor : float
+        The residual's rounding floor [N]: nodal forces are sums of edge forces computed from
+        coordinate differences, so |R| cannot fall below about eps N max|edge force| (64 eps N
+        times it is used). Solvers converge at max(their tolerance, this floor).
     """
 
     energy: float
     gradient: np.ndarray | None
     residual: np.ndarray | None
     stiffness: BandedMatrix | None
+    residual_floor: float = 0.0
 
 
 class Scene:
@@ -246,7 +251,8 @@ class Scene:
             stiffness = BandedMatrix(band.reshape(self.n_band, 3 * self.bandwidth + 1).T, self.bandwidth)
             if self.bodies:
                 stiffness = self._bordered(stiffness, nodes)
-        return Evaluation(energy, gradient, gradient[self.free], stiffness)
+        floor = 64.0 * np.finfo(float).eps * self.meridian.nodes * float(np.max(np.abs(grad_local)))
+        return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
 
     def _bordered(self, band: BandedMatrix, nodes) -> BodyMatrix:
         """The band bordered by the rigid bodies' rows and columns (node-body and body-body blocks)."""

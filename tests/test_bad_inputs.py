@@ -165,10 +165,6 @@ RESULTS = [
      ["no equilibrium on the load path beyond voltage"]),
     ("Gent past its lock at the start", past_gent_lock, None, "left_domain",
      ["left the model's domain", "starting state", "Gent(mu=1.0, Jlim=1.0)"]),
-    ("Gent plate pushed past its lock", lambda: equilibrium(build_scene("plate", nodes=11, material="gent",
-                                                                          Jlim=0.01, pressure=1.0)),
-     ["equilibrium", "plate", "--set", "nodes=11", "--set", "material=gent", "--set", "Jlim=0.01", "--pressure", "1"],
-     "no_equilibrium", ["no equilibrium on the load path beyond pressure"]),
 ]
 
 

@@ -96,3 +96,16 @@ def test_exact_balloon_pressure_minima_match_model_table():
         lam, p = exact.balloon_extrema(E_hat=E_hat)[1]
         assert p == pytest.approx(p_min, rel=1e-6)
         assert lam == pytest.approx(lam_min, abs=1e-4)
+
+
+def test_gent_plate_near_its_lock_is_an_equilibrium_not_a_failure():
+    """A Gent membrane stiffens without bound at its lock, so any pressure has an equilibrium; near
+    the lock rounding is amplified by 1/(1 - (I1-3)/Jlim), and the solver must still converge."""
+    scene = build_scene("plate", nodes=11, material="gent", Jlim=0.01, pressure=1.0)
+    eq = equilibrium(scene)
+    assert eq.converged
+    lam1, lam2 = scene.stretches(eq.q)
+    locked = lam1 ** 2 + lam2 ** 2 + 1 / (lam1 * lam2) ** 2 - 3
+    assert 0.009 < locked.max() < 0.01                      # right at, never past, the lock
+    pressure_forces = np.abs(scene.load_derivative(eq.q, "pressure")).max()
+    assert eq.report.residual_norm < 1e-9 * pressure_forces

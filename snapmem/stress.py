@@ -1,0 +1,166 @@
+"""A catalogue of stiff and extreme cases: each either succeeds, checked against a known answer,
+or fails with a clear, specific message. None may hang, return NaN or report success on garbage.
+
+Every case is a function of a small design dict returning a row: ``outcome`` ('ok' when the
+solver succeeded and the answer passed its check, 'failed_clearly' when the solver reported a
+failure with a message, 'wrong' when it claimed success on an answer that fails the check),
+``iterations``, ``step_cuts``, ``check`` (what was compared), ``error`` and ``message``.
+:func:`run_case` dispatches by the design's ``case``; ``studies/stress_cases.py`` runs the whole
+catalogue through :func:`snapmem.sweep.sweep` with a per-case time limit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import exact
+from .continuation import ContinuationOptions, trace
+from .errors import SnapmemError, SolverError
+from .newton import equilibrium
+from .scenes import build_scene
+
+
+def _row(ok: bool, iterations, cuts, check, error, message) -> dict:
+    bad = error is None or not math.isfinite(error)
+    return {"outcome": "ok" if ok and not bad else ("wrong" if ok else "failed_clearly"),
+            "iterations": int(iterations), "step_cuts": int(cuts), "check": check,
+            "error": float("nan") if error is None else float(error), "message": message}
+
+
+def _trace_row(branch, check, error, tol):
+    ok = error is not None and math.isfinite(error) and error <= tol
+    message = branch.status if ok else f"{branch.status}; {check} error {error:.3g} > {tol:g}"
+    return _row(ok, branch.stats["newton_iterations"], branch.stats["rejected"], check, error, message) | {
+        "outcome": "ok" if ok else "wrong"}
+
+
+def gent_lock(d):
+    """Gent balloon inflated until the stretch reaches 99.9% of the lock stretch (I1 - 3 = Jlim).
+
+    Check: the stretch at the final pressure against the exact uniformly inflated Gent balloon,
+    p = (2 H / R) mu (lam^-1 - lam^-7) / (1 - (2 lam^2 + lam^-4 - 3) / Jlim) (pressure at fixed
+    stretch would amplify the error by the curve's steepness near the lock).
+    """
+    Jlim = d["Jlim"]
+    lam_lock = math.sqrt(max(r.real for r in np.roots([2.0, -(Jlim + 3.0), 0.0, 1.0]) if abs(r.imag) < 1e-12))
+    branch = trace(build_scene("balloon", nodes=d.get("nodes", 101), material="gent", mu=1.0, Jlim=Jlim),
+                   "pressure", until={"stretch": 0.999 * lam_lock})
+    stretch, p = branch.table["stretch"].iloc[-1], branch.table["pressure"].iloc[-1]
+
+    def p_exact(lam):
+        return 0.02 * (1 / lam - lam ** -7) / (1 - (2 * lam ** 2 + lam ** -4 - 3) / Jlim)
+
+    lam = np.linspace(1.0 + 1e-9, lam_lock * (1 - 1e-12), 200001)
+    rising = np.flatnonzero(np.diff(p_exact(lam)) > 0)
+    last_fold = lam[rising[0]] if rising.size else 1.0
+    grid = lam[lam > max(last_fold, 1.0 + 1e-6)]
+    grid = grid[np.concatenate([[True], np.diff(p_exact(grid)) > 0])]
+    lam_exact = float(np.interp(p, p_exact(grid), grid))
+    return _trace_row(branch, "stretch at the final pressure vs exact Gent balloon", abs(stretch / lam_exact - 1), 1e-3)
+
+
+def thickness(d):
+    """Balloon with H/R from 1e-5 to 0.1: located limit pressure against the exact formula."""
+    ratio = d["H_over_R"]
+    branch = trace(build_scene("balloon", nodes=101, R=1.0, H=ratio), "pressure", until={"stretch": 2.0},
+                   options=ContinuationOptions(stop_at_first_limit=True))
+    lps = branch.limit_points()
+    if lps.empty:
+        return _row(False, branch.stats["newton_iterations"], branch.stats["rejected"], "limit pressure", None,
+                    f"no limit point found: {branch.status}")
+    _, p_lp = exact.balloon_limit_point(R=1.0, H=ratio)
+    return _trace_row(branch, "limit pressure vs exact", abs(lps["pressure"].iloc[0] / p_lp - 1), 1e-3)
+
+
+def large_stretch(d):
+    """Balloon traced to stretch 10: pressure along the whole curve against the exact formula."""
+    branch = trace(build_scene("balloon", nodes=d.get("nodes", 201)), "pressure", until={"stretch": d["stretch"]})
+    t = branch.table
+    err = float(np.max(np.abs(t["pressure"] - exact.balloon_pressure(t["stretch"]))) / exact.balloon_limit_point()[1])
+    reached = abs(t["stretch"].iloc[-1] - d["stretch"]) < 1e-6
+    return _trace_row(branch, f"max |p - p_exact| / p_limit up to stretch {d['stretch']}",
+                      err if reached else float("inf"), 2e-3)
+
+
+def voltage_alone(d):
+    """Balloon with no pressure, voltage raised past the electromechanical limit (E_hat max)."""
+    branch = trace(build_scene("balloon", nodes=101, with_loads=("voltage",)), "E_hat", until={"stretch": 3.0})
+    lps = branch.limit_points()
+    lam = np.linspace(1.001, 3.0, 40001)
+    e_max = float(np.nanmax(exact.balloon_e_hat(lam, 0.0)))
+    if lps.empty:
+        return _row(False, branch.stats["newton_iterations"], branch.stats["rejected"], "electromechanical limit", None,
+                    f"no limit point: {branch.status}")
+    return _trace_row(branch, "limit E_hat at p = 0 vs exact", abs(lps["E_hat"].iloc[0] / e_max - 1), 2e-3)
+
+
+def mesh(d):
+    """Balloon equilibrium at p_hat = 0.01 on N nodes, 5 to 100001: stretch against the exact formula."""
+    n = d["nodes"]
+    eq = equilibrium(build_scene("balloon", nodes=n, pressure=0.01))
+    lam = exact.balloon_stretch(0.01)
+    err = abs(eq.measures()["stretch"] / lam - 1) if eq.converged else None
+    # the O(h^2) error is about 0.45 / N^2; past N ~ 1e4 the condition number of K (~ N^2) lets
+    # double precision carry the state only to about eps N^2 ~ 1e-7
+    tol = max(1.0 / n ** 2, 1e-6)
+    ok = eq.converged and err is not None and err <= tol
+    return _row(eq.converged, eq.report.iterations, eq.report.step_cuts, f"stretch vs exact (tol {tol:g})", err,
+                eq.report.reason) | ({"outcome": "ok" if ok else ("wrong" if eq.converged else "failed_clearly")})
+
+
+def fat_torus(d):
+    """Torus with Rs/Rb up to 0.95: a limit point located (no exact value: must exist and be finite)."""
+    branch = trace(build_scene("torus", nodes=200, aspect_ratio=d["aspect_ratio"]), "pressure",
+                   until={"stretch_max": 12.0}, options=ContinuationOptions(stop_at_first_limit=True))
+    lps = branch.limit_points()
+    if lps.empty:
+        return _row(False, branch.stats["newton_iterations"], branch.stats["rejected"], "limit point exists", None,
+                    f"no limit point: {branch.status}")
+    ok = bool(lps["located"].iloc[0]) and abs(lps["min_eig"].iloc[0]) < 1e-9
+    return _row(True, branch.stats["newton_iterations"], branch.stats["rejected"],
+                "limit point located (|min_eig| at it)", abs(lps["min_eig"].iloc[0]),
+                f"p_limit = {lps['pressure'].iloc[0]:.6g}") | {"outcome": "ok" if ok else "wrong"}
+
+
+def no_equilibrium(d):
+    """A voltage so large no equilibrium exists (balloon at p_hat = 0.01, E_hat = 1): must fail clearly."""
+    eq = equilibrium(build_scene("balloon", nodes=81, pressure=0.01, E_hat=d["E_hat"]))
+    if eq.converged:
+        return _row(True, eq.report.iterations, eq.report.step_cuts, "must report no equilibrium", None,
+                    f"claimed convergence: {eq.report.reason}") | {"outcome": "wrong"}
+    return _row(False, eq.report.iterations, eq.report.step_cuts, "reports failure", None, eq.report.reason)
+
+
+CASES = {
+    "gent_lock": (gent_lock, [{"Jlim": j} for j in (5.0, 20.0, 270.0)]),
+    "thickness": (thickness, [{"H_over_R": r} for r in (1e-5, 1e-4, 1e-3, 1e-2, 0.1)]),
+    "large_stretch": (large_stretch, [{"stretch": 10.0}]),
+    "voltage_alone": (voltage_alone, [{}]),
+    "mesh": (mesh, [{"nodes": n} for n in (5, 11, 101, 1001, 10001, 100001)]),
+    "fat_torus": (fat_torus, [{"aspect_ratio": a} for a in (0.8, 0.9, 0.95)]),
+    "no_equilibrium": (no_equilibrium, [{"E_hat": 1.0}]),
+}
+
+
+def designs(quick: bool = False) -> list[dict]:
+    """Every case's designs, as dicts with a ``case`` key (``quick``: the first design of each)."""
+    out = []
+    for name, (_, grid) in CASES.items():
+        for d in (grid[:1] if quick else grid):
+            out.append({"case": name, **d})
+    return out
+
+
+def run_case(design: dict) -> dict:
+    """Run one design of the catalogue (a sweep job); solver failures are rows, not exceptions."""
+    design = dict(design)
+    name = design.pop("case")
+    if name not in CASES:
+        raise SnapmemError(f"case = {name!r}: unknown; allowed: {', '.join(CASES)}")
+    clean = {k: v for k, v in design.items() if not (isinstance(v, float) and math.isnan(v))}
+    try:
+        return CASES[name][0](clean)
+    except SolverError as exc:
+        return _row(False, 0, 0, "", None, f"solver failure: {exc}")
