@@ -173,7 +173,7 @@ register(SceneSpec(
        Parameter("t_hold", 15.0, "s", "pressure held and voltage switched off", minimum=0.0),
        Parameter("t_switch", 0.05, "s", "time the voltage takes to fall to 0", minimum=0.0, open_min=True),
        Parameter("t_down", 20.0, "s", "pressure starts falling", minimum=0.0))
-    + _dynamics_parameters(1000.0, 1.0, 30.0),
+    + _dynamics_parameters(1000.0, 1.0, 30.0, tol=1e-2),
     _pump))
 EXPERIMENTS["pump"] = _pump_experiment
 
@@ -222,7 +222,7 @@ for _kind, _rw, _pmax in (("rod", 0.04, 2500.0), ("shell", 0.25, 2500.0)):
         + _contact_parameters(1e5, 5e-4)
         + (Parameter("rate", 100.0, "Pa/s", "pressure rate", minimum=0.0, open_min=True),
            Parameter("p_max", _pmax, "Pa", "pressure held after the ramp", minimum=0.0))
-        + _dynamics_parameters(1000.0, 1.0, 30.0),
+        + _dynamics_parameters(1000.0, 1.0, 30.0, tol=1e-2),
         _gripper(_kind)))
     EXPERIMENTS[f"gripper_{_kind}"] = _gripper_experiment
 
