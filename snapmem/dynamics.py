@@ -523,7 +523,8 @@ class Settled:
 
 
 def settle(scene: Scene, q: np.ndarray, loads=None, rho: float = 1.0, damping: float = 1.0,
-           t_max: float = 1e3, rest_tol: float = 1e-6, options: DynamicsOptions = DynamicsOptions(),
+           t_max: float = 1e3, rest_tol: float = 1e-6,
+           options: DynamicsOptions = DynamicsOptions(scheme="bdf2", tol=1e-3),
            v0: np.ndarray | None = None) -> Settled:
     """Run the damped dynamics from q (e.g. just past a limit point) until it comes to rest.
 
@@ -547,8 +548,9 @@ def settle(scene: Scene, q: np.ndarray, loads=None, rho: float = 1.0, damping: f
     -------
     Settled
         The rest state (polished to a static equilibrium with :func:`snapmem.newton.solve`), the
-        loads there and the trajectory: hand ``q`` back to continuation to go on along the far
-        branch.
+        loads there and the trajectory: hand it back to continuation to go on along the far
+        branch, ``trace(scene, control, start=(rest.q, rest.loads))``. The default integrator is
+        BDF2 at a loose tolerance: only where the motion ends matters, not its path.
     """
     at = _as_schedule(loads if loads is not None else {})
     check_real("damping", damping, minimum=0.0, min_inclusive=False)
