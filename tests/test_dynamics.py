@@ -175,3 +175,14 @@ def test_settle_after_the_limit_point_lands_on_the_far_branch():
     p_far = exact.balloon_pressure(np.array(far))
     lam_exact = far[int(np.argmin(np.abs(p_far - p)))]
     assert lam == pytest.approx(lam_exact, rel=5e-3)
+
+
+def test_energy_and_residual_line_searches_agree():
+    """Both Newton line searches of a time step converge to the same trajectory (to the Newton tolerance)."""
+    scene = balloon(21)
+    out = {}
+    for ls in ("energy", "residual"):
+        traj = simulate(scene, schedule(pressure=[(0, 0), (20, 0.016)]), 30.0, rho=RHO, damping=0.5,
+                        options=DynamicsOptions(scheme="bdf2", dt=0.1, adaptive=False, line_search=ls))
+        out[ls] = traj["r"][:, 10]
+    np.testing.assert_allclose(out["energy"], out["residual"], rtol=1e-6)
