@@ -173,7 +173,7 @@ register(SceneSpec(
        Parameter("t_hold", 15.0, "s", "pressure held and voltage switched off", minimum=0.0),
        Parameter("t_switch", 0.05, "s", "time the voltage takes to fall to 0", minimum=0.0, open_min=True),
        Parameter("t_down", 20.0, "s", "pressure starts falling", minimum=0.0))
-    + _dynamics_parameters(1000.0, 1.0, 30.0, tol=1e-2),
+    + _dynamics_parameters(1000.0, 1.0, 30.0, tol=2e-2),
     _pump))
 EXPERIMENTS["pump"] = _pump_experiment
 
