@@ -67,6 +67,7 @@ class Contact(NodeTerm):
     def __post_init__(self):
         check_real("kappa", self.kappa, minimum=0.0, min_inclusive=False)
         check_real("dhat", self.dhat, minimum=0.0, min_inclusive=False)
+        object.__setattr__(self, "_index", None if self.nodes is None else np.asarray(self.nodes, dtype=int))
 
     # a subclass gives the gap of nodes x (M, 2) from the body at heights y (k,):
     # d (M,), its gradient (M, 2 + k) and Hessian (M, 2 + k, 2 + k) (None for a linear gap)
@@ -74,7 +75,7 @@ class Contact(NodeTerm):
         raise NotImplementedError
 
     def _selected(self, x):
-        return x if self.nodes is None else x[list(self.nodes)]
+        return x if self._index is None else x[self._index]
 
     def gaps(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Gap of every node of the term (in ``nodes`` order), shape (M,) [m]."""
@@ -82,7 +83,9 @@ class Contact(NodeTerm):
 
     def node_local(self, x, y, area, loads, order):
         k = len(self.bodies)
-        idx = np.arange(x.shape[0]) if self.nodes is None else np.asarray(self.nodes)
+        idx = np.arange(x.shape[0]) if self._index is None else self._index
+        d = self.gap(x[idx], y, 0)[0]
+        idx = idx[d < self.dhat]                   # only nodes within the barrier width feel it
         d, dg, dh = self.gap(x[idx], y, order)
         c = self.kappa * area[idx] / self.dhat
         b, b1, b2 = barrier(d, self.dhat, order)
@@ -136,7 +139,7 @@ class Contact(NodeTerm):
 
     def forces(self, x: np.ndarray, y: np.ndarray, area: np.ndarray) -> np.ndarray:
         """Normal force of the body on each node's ring, |kappa A_i b'(d_i) / d_hat|, shape (M,) [N]."""
-        idx = np.arange(x.shape[0]) if self.nodes is None else np.asarray(self.nodes)
+        idx = np.arange(x.shape[0]) if self._index is None else self._index
         d = self.gap(x[idx], y, 0)[0]
         return np.abs(self.kappa * area[idx] / self.dhat * barrier(d, self.dhat, 1)[1])
 
