@@ -64,7 +64,7 @@ def gripper(out, nodes, quick):
 def ball(out, nodes, quick):
     drops, rest, throws = [], [], []
     for xi in ((10.0,) if quick else (0.1, 1.0, 10.0)):
-        traj = run("ball_drop", nodes=nodes, xi=xi, t_end=0.5 if quick else 20.0)
+        traj = run("ball_drop", nodes=nodes, xi=xi, t_end=0.5 if quick else 60.0)
         drops.append(pd.DataFrame({"xi": xi, "t": traj["t"], "ball_z": traj["ball_z"], "min_gap": traj["min_gap"]}))
     static = resting(build_scene("ball_drop", nodes=nodes), 500.0)[-1]
     for mb in ((0.5,) if quick else (0.1, 0.3, 0.5)):
