@@ -641,11 +641,36 @@ def _locate_critical(tracer, base: Point, p: Point):
             return float(pt.eigs[i])
 
         located = _locate_value(tracer, base, p, crossing, "critical", known={0.0: base, ds: p})
+        if located is None:
+            located = _polish_critical(tracer, base, p, base.vectors[:, i_base] + p.vectors[:, i_p] * np.sign(base.vectors[:, i_base] @ p.vectors[:, i_p]))
     if located is None:       # bracketed only: report the nearer end
         located = Point(p.x, p.lam, p.tangent, p.eigs, p.negative, p.s, p.ds, 0)
     located.kind = _classify(tracer, located, base, p)
     located.negative = max(base.negative, p.negative)
     return located
+
+
+def _polish_critical(tracer, base: Point, p: Point, phi: np.ndarray):
+    """Where following the crossing eigenvalue fails (modes crowding near a bifurcation), locate
+    the singular point by Newton on the minimally extended system [R = 0, g = 0] from the
+    bracket, as fold curves do. Accepted if it lands within the bracket."""
+    if isinstance(tracer.pb, VolumeProblem):
+        return None
+    result = _fold_newton(tracer.pb, tracer.scene, 0.5 * (base.x + p.x), 0.5 * (base.lam + p.lam),
+                          phi / np.linalg.norm(phi), FoldOptions())
+    if result is None:
+        return None
+    x, lam, _, _ = result
+    span = np.append(p.x - base.x, p.lam - base.lam)
+    where = tracer.inner(span, np.append(x - base.x, lam - base.lam)) / tracer.inner(span, span)
+    if not -0.25 <= where <= 1.25:
+        log.warning("critical point polished outside its bracket (at %.3g of it): not used", where)
+        return None
+    _, J = tracer.pb.evaluate(x, lam)
+    pt = Point(x, lam, s=base.s + where * (p.s - base.s))
+    tracer.finish(pt, J, _with_vectors(base, p), tangent=True, precise=True)
+    pt.kind, pt.located = "critical", True
+    return pt
 
 
 def _classify(tracer, c: Point, base: Point, p: Point) -> str:

@@ -514,6 +514,8 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             if report.iterations > 6:
                 grow = min(grow, 1.0)
             dt = min(options.dt_max, max(options.dt_min, dt * grow))
+        else:
+            dt = options.dt          # a fixed step returns to its size after a cut or a landing on a kink
     if status != "completed":
         log.warning("simulation stopped early: %s", status)
         recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)

@@ -11,7 +11,9 @@ catalogue through :func:`snapmem.sweep.sweep` with a per-case time limit.
 
 from __future__ import annotations
 
+import json
 import math
+import time
 
 import numpy as np
 
@@ -133,6 +135,43 @@ def no_equilibrium(d):
     return _row(False, eq.report.iterations, eq.report.step_cuts, "reports failure", None, eq.report.reason)
 
 
+def contact(d):
+    """Gripper around a rod at 2000 Pa (past the free limit near 1750 Pa: the rod stops the snap),
+    barrier width dhat = fraction x rod radius, down to 1e-7, and contact stiffness kappa."""
+    from .contact import contact_report
+    Rw = 0.04
+    scene = build_scene("gripper_rod", Rw=Rw, dhat=d["dhat_fraction"] * Rw, kappa=d["kappa"], pressure=2000.0)
+    eq = equilibrium(scene)
+    report = contact_report(scene, eq.q)
+    gap, force = report["rod_gap"], report["rod_force"]
+    ok = eq.converged and gap > 0 and math.isfinite(force) and force > 0
+    return _row(eq.converged, eq.report.iterations, eq.report.step_cuts, "smallest gap > 0 and rod force > 0 (gap)",
+                gap, f"{eq.report.reason}; rod force {force:.4g} N, smallest gap {gap:.3g} m") | {
+        "outcome": "ok" if ok else ("wrong" if eq.converged else "failed_clearly")}
+
+
+def time_step(d):
+    """The pump's 30 s cycle with a fixed step dt (no adaptivity) through both snaps; the snap time
+    against the adaptive run of its scheme."""
+    from .dynamics import DynamicsOptions
+    from .robots import run
+    options = DynamicsOptions(scheme=d["scheme"], dt=d["dt"], adaptive=False, dt_max=d["dt"])
+    traj = run("pump", options=options, nodes=31)
+    reference = run("pump", options=DynamicsOptions(scheme=d["scheme"]), nodes=31)
+    try:
+        t_snap, t_ref = traj.snap_time(), reference.snap_time()
+    except Exception as exc:                     # no snap found in the trajectory
+        return _row(False, 0, 0, "snap time", None, f"{traj.meta.get('status', '')}: {exc}")
+    err = abs(t_snap - t_ref)
+    status = traj.meta.get("status", "")
+    completed = status == "completed"
+    ok = completed and err <= max(2 * d["dt"], 0.05)
+    return _row(completed, traj.meta.get("newton_iterations", 0), traj.meta.get("rejected", 0),
+                "snap time vs adaptive run [s] (tolerance 2 dt)", err,
+                f"{status}; snap at {t_snap:.3f} s, adaptive {t_ref:.3f} s") | {
+        "outcome": "ok" if ok else ("wrong" if completed else "failed_clearly")}
+
+
 CASES = {
     "gent_lock": (gent_lock, [{"Jlim": j} for j in (5.0, 20.0, 270.0)]),
     "thickness": (thickness, [{"H_over_R": r} for r in (1e-5, 1e-4, 1e-3, 1e-2, 0.1)]),
@@ -141,26 +180,30 @@ CASES = {
     "mesh": (mesh, [{"nodes": n} for n in (5, 11, 101, 1001, 10001, 100001)]),
     "fat_torus": (fat_torus, [{"aspect_ratio": a} for a in (0.8, 0.9, 0.95)]),
     "no_equilibrium": (no_equilibrium, [{"E_hat": 1.0}]),
+    "contact": (contact, [{"dhat_fraction": f, "kappa": k} for f in (1e-1, 1e-3, 1e-5, 1e-7) for k in (1e5, 1e9)]),
+    "time_step": (time_step, [{"scheme": s, "dt": dt} for s in ("euler", "bdf2") for dt in (0.01, 0.1, 0.5)]),
 }
 
 
 def designs(quick: bool = False) -> list[dict]:
-    """Every case's designs, as dicts with a ``case`` key (``quick``: the first design of each)."""
+    """Every case's designs as sweep designs {case, parameters (JSON)} (``quick``: one per case)."""
     out = []
     for name, (_, grid) in CASES.items():
         for d in (grid[:1] if quick else grid):
-            out.append({"case": name, **d})
+            out.append({"case": name, "parameters": json.dumps(d, sort_keys=True)})
     return out
 
 
 def run_case(design: dict) -> dict:
     """Run one design of the catalogue (a sweep job); solver failures are rows, not exceptions."""
-    design = dict(design)
-    name = design.pop("case")
+    name = design["case"]
     if name not in CASES:
         raise SnapmemError(f"case = {name!r}: unknown; allowed: {', '.join(CASES)}")
-    clean = {k: v for k, v in design.items() if not (isinstance(v, float) and math.isnan(v))}
+    params = json.loads(design["parameters"]) if isinstance(design.get("parameters"), str) else {}
+    start = time.perf_counter()
     try:
-        return CASES[name][0](clean)
+        row = CASES[name][0](params)
     except SolverError as exc:
-        return _row(False, 0, 0, "", None, f"solver failure: {exc}")
+        row = _row(False, 0, 0, "", None, f"solver failure: {exc}")
+    row["wall_time_s"] = time.perf_counter() - start
+    return row
