@@ -181,13 +181,19 @@ class Plane(Contact):
         return _linear_gap(s * (x[:, 1] - self.z0), np.array([0.0, s]), order)
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Ball(Contact):
     """A rigid ball of radius ``radius`` [m] centred on the axis: d = |x - (0, zb)| - radius.
 
     With ``mass`` None the ball is held at height ``z0``; with a mass [kg] its height zb is a
     degree of freedom of its own (a :class:`RigidBody` named ``name``, starting at ``z0``) with
     weight -mass * gravity * zb (``gravity`` [m/s^2] is signed along z, e.g. -10).
+
+    With ``meridian`` given, the gap is each *edge's* distance to the ball (point-segment, IPC's
+    point-edge distance: to the nearer end node, or to the edge's line where the centre projects
+    inside it) and each edge's barrier is weighted by its reference ring area 2 pi r_m_bar l_bar.
+    Then a long, stretched edge cannot pass through the ball between its two nodes, which node
+    gaps alone allow (a snap stretches the balloon's cap edges ~20x). ``nodes`` is ignored then.
     """
 
     radius: float
@@ -195,6 +201,7 @@ class Ball(Contact):
     mass: float | None = None
     gravity: float = 0.0
     name: str = "ball"
+    meridian: object = None
 
     def __post_init__(self):
         super().__post_init__()
@@ -202,6 +209,61 @@ class Ball(Contact):
         if self.mass is not None:
             check_real("mass", self.mass, minimum=0.0, min_inclusive=False)
             object.__setattr__(self, "bodies", (RigidBody(self.name, self.z0, self.mass),))
+        if self.meridian is not None:
+            m = self.meridian
+            object.__setattr__(self, "_edge_area", 2.0 * np.pi * m.mid_radius * m.length)
+
+    # ---- edges: point-segment distance of the centre c = (0, zb) to each edge [a, b]
+    def edge_gap(self, x, y, order, which=None):
+        """Distance minus radius of each edge (or edges ``which``), with derivatives in
+        (r_a, z_a, r_b, z_b[, zb]): d (M,), gradient (M, 4 + k), Hessian (M, 4 + k, 4 + k)."""
+        edges = self.meridian.edges if which is None else self.meridian.edges[which]
+        a, b = x[edges[:, 0]], x[edges[:, 1]]
+        zc = self._centre(y)
+        u = b - a
+        w = np.stack([-a[:, 0], zc - a[:, 1]], axis=1)                # c - a
+        L2 = np.einsum("ij,ij->i", u, u)
+        t = np.einsum("ij,ij->i", w, u) / L2
+        end_a, end_b = t <= 0, t >= 1
+        inner = ~(end_a | end_b)
+        n = 5 if self.bodies else 4
+        m = a.shape[0]
+        d = np.empty(m)
+        g = np.zeros((m, n)) if order >= 1 else None
+        h = np.zeros((m, n, n)) if order >= 2 else None
+        for mask, cols, pts in ((end_a, [0, 1], a), (end_b, [2, 3], b)):
+            if np.any(mask):
+                dn, gn, hn = self.gap(pts[mask], y, order)         # node distance, (r, z[, zb])
+                d[mask] = dn
+                idx = cols + ([4] if self.bodies else [])
+                if order >= 1:
+                    g[np.ix_(np.flatnonzero(mask), idx)] = gn
+                if order >= 2:
+                    rows = np.flatnonzero(mask)
+                    h[rows[:, None, None], np.array(idx)[None, :, None], np.array(idx)[None, None, :]] = hn
+        if np.any(inner):
+            ui, wi = u[inner], w[inner]
+            C = ui[:, 0] * wi[:, 1] - ui[:, 1] * wi[:, 0]
+            L = np.sqrt(L2[inner])
+            sgn = np.sign(C)
+            d[inner] = sgn * C / L - self.radius
+            if order >= 1:
+                Ju = _JU[:, :n]
+                gC = np.stack([ui[:, 1] - wi[:, 1], wi[:, 0] - ui[:, 0], wi[:, 1], -wi[:, 0]]
+                              + ([ui[:, 0]] if self.bodies else []), axis=1)
+                uh = ui / L[:, None]
+                gL = uh @ Ju                                              # (M, n)
+                g[inner] = sgn[:, None] * (gC / L[:, None] - (C / L ** 2)[:, None] * gL)
+                if order >= 2:
+                    HC = _HC[:n, :n]
+                    P = (np.eye(2)[None] - uh[:, :, None] * uh[:, None, :]) / L[:, None, None]
+                    HL = np.einsum("ki,mkl,lj->mij", Ju, P, Ju)
+                    outer = gC[:, :, None] * gL[:, None, :]
+                    hi = (HC[None] / L[:, None, None] - (outer + outer.transpose(0, 2, 1)) / (L ** 2)[:, None, None]
+                          - (C / L ** 2)[:, None, None] * HL
+                          + (2 * C / L ** 3)[:, None, None] * gL[:, :, None] * gL[:, None, :])
+                    h[inner] = sgn[:, None, None] * hi
+        return d, g, h
 
     def _centre(self, y):
         return float(y[0]) if self.bodies else self.z0
@@ -226,7 +288,14 @@ class Ball(Contact):
         return d, g, h
 
     def max_step(self, x, y, dx, dy):
-        """Largest alpha <= 1 before any node reaches the sphere (first root of |p + a dp| = rb), times 0.9."""
+        """Largest alpha <= 1 before any node reaches the sphere (first root of |p + a dp| = rb), times 0.9;
+        with edges, further halved until every edge keeps 10% of its gap."""
+        alpha = self._node_max_step(x if self.meridian is None else x, y, dx, dy)
+        if self.meridian is not None:
+            alpha = self._edges_clear(x, y, dx, np.asarray(dy, dtype=float), alpha)
+        return alpha
+
+    def _node_max_step(self, x, y, dx, dy):
         xs, dxs = self._selected(x), self._selected(dx)
         dzb = float(dy[0]) if self.bodies else 0.0
         pr, pz = xs[:, 0], xs[:, 1] - self._centre(y)
@@ -241,6 +310,59 @@ class Ball(Contact):
         root = (-b[hit] - np.sqrt(disc[hit])) / a[hit]          # first crossing (c > 0)
         return float(min(1.0, FRACTION_TO_BOUNDARY * np.min(root)))
 
+    def _edges_clear(self, x, y, dx, dy, alpha):
+        """Largest alpha' <= alpha (halving) at which no edge reaches the ball, keeping 10% of each gap."""
+        d0 = self.edge_gap(x, y, 0)[0]
+        for _ in range(40):
+            d = self.edge_gap(x + alpha * dx, y + alpha * dy, 0)[0]
+            if np.all(d > (1.0 - FRACTION_TO_BOUNDARY) * np.minimum(d0, self.dhat)):
+                return alpha
+            alpha *= 0.5
+        return alpha
+
+    def node_local(self, x, y, area, loads, order):
+        if self.meridian is None:
+            return super().node_local(x, y, area, loads, order)
+        k = len(self.bodies)
+        d_all = self.edge_gap(x, y, 0)[0]
+        which = np.flatnonzero(d_all < self.dhat)
+        d, dg, dh = self.edge_gap(x, y, order, which)
+        c = self.kappa * self._edge_area[which] / self.dhat
+        b, b1, b2 = barrier(d, self.dhat, order)
+        out = NodeLocal(float(c @ b) + self.body_energy(y))
+        out.body_gradient, out.body_hessian = self.body_energy_derivatives(y, order)
+        if order < 1:
+            return out
+        n_nodes, n_edges = x.shape[0], d_all.size
+        out.gradient = np.zeros((n_nodes, 2 + k))
+        eg = np.zeros((n_edges, 4 + k))
+        eg[which] = (c * b1)[:, None] * dg
+        out.edge_gradient = eg
+        if order >= 2:
+            out.hessian = np.zeros((n_nodes, 2 + k, 2 + k))
+            eh = np.zeros((n_edges, 4 + k, 4 + k))
+            eh[which] = (c * b2)[:, None, None] * dg[:, :, None] * dg[:, None, :] + (c * b1)[:, None, None] * dh
+            out.edge_hessian = eh.transpose(1, 2, 0)
+        return out
+
+    def gaps(self, x, y):
+        return super().gaps(x, y) if self.meridian is None else self.edge_gap(x, y, 0)[0]
+
+    def admissible(self, x, y):
+        if self.meridian is None:
+            return super().admissible(x, y)
+        d = self.edge_gap(x, y, 0)[0]
+        if np.any(d <= 0):
+            i = int(np.argmin(d))
+            return f"edge {i} touches or crosses the ball (gap {d[i]:.3g} m)"
+        return None
+
+    def forces(self, x, y, area):
+        if self.meridian is None:
+            return super().forces(x, y, area)
+        d = self.edge_gap(x, y, 0)[0]
+        return np.abs(self.kappa * self._edge_area / self.dhat * barrier(d, self.dhat, 1)[1])
+
     def body_energy(self, y):
         return -self.mass * self.gravity * float(y[0]) if self.bodies else 0.0
 
@@ -248,6 +370,13 @@ class Ball(Contact):
         if not self.bodies:
             return None, None
         return np.array([-self.mass * self.gravity]), np.zeros((1, 1))
+
+
+# constant Jacobians of the point-line distance: u = b - a and w = c - a in (r_a, z_a, r_b, z_b, zc)
+_JU = np.array([[-1.0, 0.0, 1.0, 0.0, 0.0], [0.0, -1.0, 0.0, 1.0, 0.0]])
+_JW = np.array([[-1.0, 0.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0, 1.0]])
+_M = np.array([[0.0, 1.0], [-1.0, 0.0]])                  # C = u^T M w = u_r w_z - u_z w_r
+_HC = _JU.T @ _M @ _JW + _JW.T @ _M.T @ _JU
 
 
 def contact_terms(scene) -> list:

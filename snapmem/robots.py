@@ -237,7 +237,7 @@ def _ball_scene(params, with_loads):
                            probes={"top": lambda q: float(q[2 * n - 1])})
     plate = Plane(kappa=params["kappa"], dhat=params["dhat"], z0=-R, nodes=tuple(range(1, n)))
     ball = Ball(kappa=params["kappa"], dhat=params["dhat"], radius=params["rb"], z0=R + params["rb"] + params["drop"],
-                mass=params["mb"], gravity=params["g"])
+                mass=params["mb"], gravity=params["g"], meridian=meridian)      # edges cannot pass through it
     return _with_contact(scene, plate, ball)
 
 

@@ -141,6 +141,7 @@ class Scene:
         edges = m.edges
         self.edge_dofs = np.concatenate([2 * edges[:, :1] + np.arange(2), 2 * edges[:, 1:] + np.arange(2)], axis=1)
         lpos = position[self.edge_dofs]                          # (E, 4)
+        self._edge_pos = lpos
         i, j = lpos[:, :, None], lpos[:, None, :]                # (E, 4, 1), (E, 1, 4)
         valid = (i >= 0) & (j >= 0)
         self.bandwidth = b = max(1, int(np.max(np.where(valid, np.abs(i - j), 0))))
@@ -234,12 +235,19 @@ class Scene:
         energy += sum(local.energy for _, local in nodes)
         if order < 1:
             return Evaluation(energy, None, None, None)
+        for _, local in nodes:                  # node terms' parts that live on edges (edge-body distance)
+            if local.edge_gradient is not None:
+                grad_local = _accumulate(grad_local, local.edge_gradient[:, :4])
+                if order >= 2:
+                    hess_local = _accumulate(hess_local, local.edge_hessian[:4, :4])
         gradient = np.bincount(self.edge_dofs.ravel(), grad_local.ravel(), minlength=q.size)
         for (term, local), s in zip(nodes, self._body_slices):
             gradient[: self.n_node_dofs] += local.gradient[:, :2].ravel()
             gradient[s] += local.gradient[:, 2:].sum(axis=0)
             if local.body_gradient is not None:
                 gradient[s] += local.body_gradient
+            if local.edge_gradient is not None:
+                gradient[s] += local.edge_gradient[:, 4:].sum(axis=0)
         stiffness = None
         if order >= 2:
             index, values = self._hess_index, hess_local.reshape(-1)
@@ -270,6 +278,14 @@ class Scene:
             corner[np.ix_(cols, cols)] += h[:, 2:, 2:].sum(axis=0)
             if local.body_hessian is not None:
                 corner[np.ix_(cols, cols)] += local.body_hessian
+            if local.edge_hessian is not None:
+                he = local.edge_hessian                                # (4 + k, 4 + k, E)
+                epos = self._edge_pos.T.ravel()                        # entry-major (4, E)
+                ekeep = epos >= 0
+                for a, col in enumerate(cols):
+                    coupling = he[:4, 4 + a].ravel()
+                    border[:, col] += np.bincount(epos[ekeep], coupling[ekeep], minlength=self.n_band)
+                corner[np.ix_(cols, cols)] += he[4:, 4:].sum(axis=-1)
         return BodyMatrix(band, border, corner)
 
     def energy(self, q, loads=None) -> float:

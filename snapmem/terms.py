@@ -192,6 +192,9 @@ class NodeLocal:
         Second derivatives of each node's share [N/m].
     body_gradient, body_hessian : ndarray (k,), (k, k) or None
         Parts that depend on the body coordinates y alone (a body's weight).
+    edge_gradient, edge_hessian : ndarray (E, 4 + k), (4 + k, 4 + k, E) or None
+        Parts summed over edges instead (an edge's distance to a body), in each edge's local
+        coordinates (r_a, z_a, r_b, z_b) followed by y; the Hessian entry-major like edge terms'.
     """
 
     energy: float
@@ -199,6 +202,8 @@ class NodeLocal:
     hessian: np.ndarray | None = None
     body_gradient: np.ndarray | None = None
     body_hessian: np.ndarray | None = None
+    edge_gradient: np.ndarray | None = None
+    edge_hessian: np.ndarray | None = None
 
 
 class NodeTerm(Term):

@@ -144,3 +144,55 @@ def test_bordered_matrix_matches_dense():
     ev = np.linalg.eigvalsh(D)
     np.testing.assert_allclose(M.smallest_eigenvalues(3), ev[:3], rtol=1e-10, atol=1e-10)
     assert M.negative_count() == int(np.count_nonzero(ev < 0))
+
+
+@pytest.mark.parametrize("dhat", [1e-5, 1e-3, 1e-1])
+@pytest.mark.parametrize("mass", [None, 2.0])
+@pytest.mark.parametrize("dimple", [0.0, 1.5])
+def test_ball_edge_distance_derivatives(dhat, mass, dimple):
+    """Ball against edges (point-segment distance): a dimpled pole makes the centre project inside
+    the pole's edges (the line case); a round pole makes it an end node (the node case)."""
+    rng = np.random.default_rng(11)
+    m = sphere(10.0, 11)
+    fixed = [0, 1, 2 * (m.nodes - 1)]
+    q0 = m.q * 1.1 + rng.normal(scale=0.02, size=m.q.size)
+    q0[fixed] = m.q[fixed]
+    q0[-1] -= dimple                              # lower the north pole: a dimple under the ball
+    x = q0.reshape(-1, 2)
+    zc = x[:, 1].max() + 0.5
+    for _ in range(30):                           # place the ball so the nearest edge is 0.3 dhat away
+        d, g, _ = Ball(kappa=2.0, dhat=dhat, radius=0.5, z0=zc, meridian=m).edge_gap(x, np.array([]), 1)
+        i = int(np.argmin(d))
+        zc -= (d[i] - 0.3 * dhat) / (-1.0 if abs(g[i, 1] + g[i, 3]) < 1e-12 else -(g[i, 1] + g[i, 3]))
+    term = Ball(kappa=2.0, dhat=dhat, radius=0.5, z0=zc, mass=mass, gravity=-10.0, meridian=m)
+    scene = Scene(m, 0.1, [PressureWork(), term], fixed=fixed)
+    q = np.concatenate([q0, [b.z0 for b in scene.bodies]])
+    gaps = term.gaps(scene.node_coordinates(q), q[scene.n_node_dofs:])
+    assert gaps.min() == pytest.approx(0.3 * dhat, rel=1e-3)
+    e = m.edges[int(np.argmin(gaps))]                 # where the centre projects on the nearest edge
+    a, b = x[e[0]], x[e[1]]
+    t = np.dot(np.array([0.0, zc]) - a, b - a) / np.dot(b - a, b - a)
+    assert (0 < t < 1) == (dimple > 0)
+    ev = scene.evaluate(q)
+    assert ev.energy > 0 and np.isfinite(ev.energy)
+    h = 1e-3 * 0.3 * dhat
+    eye = np.eye(q.size)
+    g_fd = np.array([(scene.energy(q + h * e) - scene.energy(q - h * e)) / (2 * h) for e in eye])
+    assert np.max(np.abs(ev.gradient - g_fd)) <= 1e-5 * np.max(np.abs(ev.gradient))
+    K_fd = np.array([(scene.gradient(q + h * e) - scene.gradient(q - h * e)) / (2 * h) for e in eye]).T
+    K = ev.stiffness.to_dense()
+    assert np.max(np.abs(K - K_fd[np.ix_(scene.free, scene.free)])) <= 1e-5 * np.max(np.abs(K))
+
+
+def test_a_long_edge_cannot_pass_through_the_ball():
+    """Two nodes either side of the ball: node gaps are positive, the edge between them is not."""
+    m = sphere(10.0, 11)
+    x = m.q.reshape(-1, 2).copy()
+    ball_nodes = Ball(kappa=1.0, dhat=0.1, radius=1.0, z0=0.0)
+    ball_edges = Ball(kappa=1.0, dhat=0.1, radius=1.0, z0=0.0, meridian=m)
+    x[5] = (3.0, 0.0)
+    x[4], x[6] = (0.5, -2.0), (0.5, 2.0)          # edges 4-5 and 5-6 fine; now make one cross the ball
+    x[3] = (0.2, -5.0)
+    x[4] = (0.3, 5.0)                             # edge 3-4 runs along the axis through the ball
+    assert ball_nodes.admissible(x, np.array([])) is None
+    assert "edge 3" in ball_edges.admissible(x, np.array([]))
