@@ -56,3 +56,34 @@ def balloon_stretch(p_hat, R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat=0.0):
     if p_hat > p_lp:
         raise ValueError(f"p_hat = {p_hat}: above the limit pressure {p_lp}")
     return brentq(lambda x: balloon_pressure(x, R, H, c1, c2, E_hat) - p_hat, 1.0, lam_lp, xtol=1e-15)
+
+
+def balloon_dynamics(pressure, t_end, R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat=0.0, rho=1.0, xi=0.0,
+                     rtol=1e-12, max_step=0.05):
+    """The uniformly inflated balloon in time: one ODE, solved by scipy (DOP853) at tight tolerance.
+
+    rho R^2 lam'' + xi rho R^2 lam' = p(t) R lam^2 / H - dW(lam, lam)/dlam, with W per unit reference
+    volume including the electric term -(mu/2) E_hat^2 lam^4 (mu = 2 (c1 + c2)), from rest at
+    lam = 1. Consistent units (normalised: mu = 1).
+
+    Parameters
+    ----------
+    pressure : callable
+        t -> p(t).
+
+    Returns
+    -------
+    callable
+        t -> (lam, lam') (scipy's dense output).
+    """
+    from scipy.integrate import solve_ivp
+    mu = 2.0 * (c1 + c2)
+
+    def rhs(t, y):
+        lam, w = y
+        dW = (4 * c1 * (lam - lam ** -5) + 4 * c2 * (lam ** 3 - lam ** -3) - 2 * mu * E_hat ** 2 * lam ** 3)
+        return [w, (pressure(t) * R * lam ** 2 / H - dW) / (rho * R ** 2) - xi * w]
+
+    sol = solve_ivp(rhs, (0.0, t_end), [1.0, 0.0], method="DOP853", rtol=rtol, atol=rtol,
+                    dense_output=True, max_step=max_step)
+    return sol.sol
