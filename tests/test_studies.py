@@ -1,0 +1,81 @@
+"""Every study runs on its small setting (--quick) and its table holds a number worth checking."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+STUDIES = Path(__file__).resolve().parents[1] / "studies"
+
+
+def run(name, tmp_path):
+    spec = importlib.util.spec_from_file_location(name, STUDIES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main(["--quick", "--out", str(tmp_path)])
+    return lambda table: pd.read_csv(tmp_path / f"{table}.csv")
+
+
+def test_fig3(tmp_path):
+    read = run("fig3_validation", tmp_path)
+    assert (read("fig3_plate")["point"].fillna("") == "").all()          # no limit point on the MR plate
+    torus = read("fig3_torus")
+    assert torus.loc[torus["point"] == "LP", "pressure"].iloc[0] == pytest.approx(0.04091, rel=5e-3)
+    assert read("fig3_balloon")["stretch"].iloc[-1] == pytest.approx(4.0, abs=1e-9)
+
+
+def test_fig4(tmp_path):
+    read = run("fig4_electro_balloon", tmp_path)
+    a = read("fig4a_balloon_pressure")
+    assert np.max(np.abs(a["pressure"] - a["p_exact"])) < 2e-4            # N = 41 against the exact curve
+    b = read("fig4b_balloon_voltage")
+    lp = b[(b["point"] == "LP") & (b["p_hat"] == 0.0095)]["E_hat"].iloc[0]
+    assert lp == pytest.approx(0.3954, rel=5e-3)
+
+
+def test_fig5(tmp_path):
+    read = run("fig5_electro_torus", tmp_path)
+    a = read("fig5a_torus_pressure")
+    limits = a[a["point"] == "LP"].groupby("E_hat_value")["pressure"].first()
+    assert limits.is_monotonic_decreasing and limits.loc[0.0] == pytest.approx(0.04091, rel=1e-2)
+
+
+def test_torus_limit_maps(tmp_path):
+    read = run("torus_limit_maps", tmp_path)
+    pm = read("torus_limit_pressure_map")
+    assert {"aspect_ratio", "E_hat", "p_limit", "u_max_limit"} <= set(pm.columns)
+    checked = pm.dropna(subset=["p_limit_traced"])
+    assert len(checked) >= 1 and np.allclose(checked["p_limit"], checked["p_limit_traced"], rtol=1e-8)
+    vm = read("torus_limit_voltage_map")
+    assert {"aspect_ratio", "pressure", "E_hat_limit", "u_max_limit"} <= set(vm.columns)
+    assert (~vm["exists"]).any() and vm["exists"].any()                  # some designs have no limit point
+
+
+def test_torus_limit_convergence(tmp_path):
+    t = run("torus_limit_convergence", tmp_path)("torus_limit_convergence")
+    assert 1.8 < t["observed_order"].iloc[-1] < 2.2
+
+
+def test_error_vs_runtime(tmp_path):
+    t = run("error_vs_runtime", tmp_path)("error_vs_runtime")
+    curve = t[t["problem"] == "balloon curve"].set_index("setting")["error"]
+    assert 3.5 < curve.loc[21] / curve.loc[41] < 4.5                     # N^-2 against the exact formula
+    assert set(t[t["problem"].str.startswith("dynamic")]["method"]) == {"euler", "midpoint", "bdf2"}
+
+
+def test_fig9(tmp_path):
+    read = run("fig9_timing", tmp_path)
+    assert (read("fig9a_static_cost")["wall_time_s"] > 0).all()
+    assert (read("fig9b_dynamic_cost")["status"] == "completed").all()
+
+
+@pytest.mark.parametrize("design", [{"case": "mesh", "parameters": '{"nodes": 11}'},
+                                    {"case": "fat_torus", "parameters": '{"aspect_ratio": 0.95}'},
+                                    {"case": "no_equilibrium", "parameters": '{"E_hat": 1.0}'}])
+def test_stress_cases_succeed_or_fail_clearly(design):
+    from snapmem import stress
+    row = stress.run_case(design)
+    expected = "failed_clearly" if design["case"] == "no_equilibrium" else "ok"
+    assert row["outcome"] == expected and row["message"]
