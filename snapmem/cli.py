@@ -272,6 +272,16 @@ def cmd_replay(args) -> int:
     return 0
 
 
+def cmd_bench(args) -> int:
+    from .bench import run
+    from .results import write_table
+    table = run(quick=args.quick)
+    write_table(table, args.out, {"command": "bench", "quick": args.quick})
+    with pd.option_context("display.width", 220, "display.max_colwidth", 90):
+        print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="snapmem", description="Snap-through of axisymmetric dielectric-elastomer membranes.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -329,6 +339,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="FOLD.csv")
     p.add_argument("--plot", metavar="FIG.png")
     p.set_defaults(func=cmd_fold)
+
+    p = sub.add_parser("bench", help="benchmarks: Newton against the banded solve, whole jobs, designs per second")
+    p.add_argument("--quick", action="store_true", help="small sizes (about a minute)")
+    p.add_argument("--out", default="results/benchmark.csv", metavar="BENCH.csv")
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("simulate", help="simulate a scene in time with its schedule (dynamics, contact)")
     p.add_argument("scene")

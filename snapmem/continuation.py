@@ -778,7 +778,7 @@ class FoldOptions:
 
 def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "pressure",
                options: FoldOptions = FoldOptions(), trace_options: ContinuationOptions = ContinuationOptions(),
-               progress: Callable[[int, int], None] | None = None) -> pd.DataFrame:
+               progress: Callable[[int, int], None] | None = None, start: tuple | None = None) -> pd.DataFrame:
     """The curve of limit points of ``control`` as a second parameter runs through ``values``.
 
     The first limit point is found by tracing a branch; every next one by Newton on the
@@ -795,6 +795,9 @@ def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "press
         Values of the second parameter, in order.
     control : str
         The continuation parameter whose limit is followed ('pressure', 'voltage', 'E_hat').
+    start : (value, x, lam, phi), optional
+        A limit point already known at ``value`` of ``scene_at`` (from another fold curve's
+        ``attrs["folds"]``): the curve continues from it instead of tracing a first branch.
 
     Returns
     -------
@@ -802,30 +805,36 @@ def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "press
         One row per value: ``value``, ``limit`` (the control at the limit point), ``exists``,
         ``method`` ('fold' or 'trace'), ``iterations``, ``status``, and the branch measures at the
         limit point (pressure, voltage, E_hat, volume, u_max, stretch_max, min_tension, ...).
+        ``table.attrs["folds"]`` maps each value with a limit point to its (value, x, lam, phi).
     """
     if control == "volume":
         raise SnapmemError("control = 'volume': volume control has no limit points to follow")
     values = [check_real("value", v) for v in values]
     if not values:
         raise SnapmemError("values: need at least one value of the second parameter")
-    rows, previous = [], []            # previous: [(value, x, lam, phi)]
+    rows, previous = [], ([start] if start is not None else [])   # previous: [(value, x, lam, phi)]
+    references: dict = {}
+    folds: dict = {}
     for i, value in enumerate(values):
         row = None
         if previous:
-            row = _continue_fold(scene_at, previous, value, control, options)
+            row = _continue_fold(scene_at, previous, value, control, options, references)
         if row is None:
             row = _fold_by_trace(scene_at(value), control, options, trace_options)
         row["value"] = value
         rows.append(row)
         if row.pop("_fold", None) is not None and row["exists"]:
             previous.append((value, row.pop("_x"), row["limit"], row.pop("_phi")))
+            folds[value] = previous[-1]
         else:
             row.pop("_x", None), row.pop("_phi", None)
         if progress is not None:
             progress(i + 1, len(values))
     table = pd.DataFrame(rows)
-    return table[["value", "limit", "exists", "method", "iterations", "status"]
-                 + [c for c in table.columns if c not in ("value", "limit", "exists", "method", "iterations", "status")]]
+    table = table[["value", "limit", "exists", "method", "iterations", "status"]
+                  + [c for c in table.columns if c not in ("value", "limit", "exists", "method", "iterations", "status")]]
+    table.attrs["folds"] = folds
+    return table
 
 
 def _fold_by_trace(scene, control, options, trace_options):
@@ -858,12 +867,16 @@ def _null_vector(K):
     return phi / np.linalg.norm(phi)
 
 
-def _continue_fold(scene_at, previous, value, control, options, depth=0):
+def _continue_fold(scene_at, previous, value, control, options, references, depth=0):
     v0, x0, lam0, phi = previous[-1]
     scene = scene_at(value)
     pb = make_problem(scene, control)
     ref_new = scene.reference_state()[scene.free]
-    ref_old = _reference_free(scene_at, v0, scene)
+    references[value] = ref_new
+    if v0 not in references:
+        old = scene_at(v0)
+        references[v0] = old.reference_state()[old.free]
+    ref_old = references[v0]
     x, lam = x0 - ref_old + ref_new, lam0
     if len(previous) >= 2:                        # secant predictor along the fold curve
         v1, x1, lam1, _ = previous[-2]
@@ -874,26 +887,14 @@ def _continue_fold(scene_at, previous, value, control, options, depth=0):
         if depth >= options.max_refinements:
             return None
         mid = 0.5 * (v0 + value)
-        row = _continue_fold(scene_at, previous, mid, control, options, depth + 1)
+        row = _continue_fold(scene_at, previous, mid, control, options, references, depth + 1)
         if row is None or not row.get("exists"):
             return None
         extended = previous + [(mid, row["_x"], row["limit"], row["_phi"])]
-        return _continue_fold(scene_at, extended, value, control, options, depth + 1)
+        return _continue_fold(scene_at, extended, value, control, options, references, depth + 1)
     x, lam, phi_new, iterations = result
     return {"limit": lam, "exists": True, "method": "fold", "iterations": iterations, "status": "located",
             **pb.measures(x, lam), "_fold": True, "_x": x, "_phi": phi_new}
-
-
-_REFERENCE_CACHE: dict = {}
-
-
-def _reference_free(scene_at, value, like: Scene):
-    key = (id(scene_at), value)
-    if key not in _REFERENCE_CACHE:
-        s = scene_at(value)
-        _REFERENCE_CACHE.clear()
-        _REFERENCE_CACHE[key] = s.reference_state()[s.free]
-    return _REFERENCE_CACHE[key]
 
 
 def _fold_newton(pb, scene, x, lam, phi, options):
