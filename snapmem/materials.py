@@ -58,6 +58,10 @@ class InvariantLaw(Law):
     (W, W_1, W_2, W_11, W_12, W_22), derivatives taken with respect to I1 and I2.
     """
 
+    #: True for laws linear in I1 and I2 (neo-Hookean, Mooney-Rivlin): their second derivatives
+    #: in the invariants vanish and the chain rule skips them
+    linear = False
+
     def invariant_derivatives(self, I1, I2):
         raise NotImplementedError
 
@@ -78,6 +82,9 @@ class InvariantLaw(Law):
         i2_12 = 4.0 * lam1 * lam2
         i2_22 = 6.0 / (b2 * b2) + 2.0 * a2
         W, W1, W2, W11, W12, W22 = self.invariant_derivatives(I1, I2)
+        if self.linear:
+            return Density(w=W, w1=W1 * i1_1 + W2 * i2_1, w2=W1 * i1_2 + W2 * i2_2,
+                           w11=W1 * i1_11 + W2 * i2_11, w12=W1 * i1_12 + W2 * i2_12, w22=W1 * i1_22 + W2 * i2_22)
         return Density(
             w=W,
             w1=W1 * i1_1 + W2 * i2_1,
@@ -100,13 +107,14 @@ class NeoHookean(InvariantLaw):
     """
 
     mu: float
+    linear = True
 
     def __post_init__(self):
         check_real("mu", self.mu, minimum=0.0, min_inclusive=False)
 
     def invariant_derivatives(self, I1, I2):
         zero = np.zeros_like(I1)
-        return 0.5 * self.mu * (I1 - 3.0), np.full_like(I1, 0.5 * self.mu), zero, zero, zero, zero
+        return 0.5 * self.mu * (I1 - 3.0), 0.5 * self.mu, 0.0, zero, zero, zero
 
 
 @dataclass(frozen=True)
@@ -121,6 +129,7 @@ class MooneyRivlin(InvariantLaw):
 
     c1: float
     c2: float
+    linear = True
 
     def __post_init__(self):
         check_real("c1", self.c1, minimum=0.0, min_inclusive=False)
@@ -132,8 +141,7 @@ class MooneyRivlin(InvariantLaw):
 
     def invariant_derivatives(self, I1, I2):
         zero = np.zeros_like(I1)
-        return (self.c1 * (I1 - 3.0) + self.c2 * (I2 - 3.0), np.full_like(I1, self.c1),
-                np.full_like(I1, self.c2), zero, zero, zero)
+        return self.c1 * (I1 - 3.0) + self.c2 * (I2 - 3.0), self.c1, self.c2, zero, zero, zero
 
 
 @dataclass(frozen=True)

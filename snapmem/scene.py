@@ -193,7 +193,15 @@ class Scene:
     # ----------------------------------------------------------------------------------------
     # assembly
     def kinematics(self, q: np.ndarray) -> EdgeKinematics:
-        return EdgeKinematics.of(self.meridian, q[: self.n_node_dofs])
+        """Edge kinematics of q; the last state's are kept, since solvers ask for the same q several
+        times in a row (assembly, domain check, measures, load derivative)."""
+        nodes = q[: self.n_node_dofs]
+        cached = self.__dict__.get("_kinematics_cache")
+        if cached is not None and cached[0].shape == nodes.shape and np.array_equal(cached[0], nodes):
+            return cached[1]
+        kin = EdgeKinematics.of(self.meridian, nodes)
+        self._kinematics_cache = (nodes.copy(), kin)
+        return kin
 
     def density(self, kin: EdgeKinematics, loads) -> Density | None:
         """Sum of the density terms' densities, or None if the scene has none."""
