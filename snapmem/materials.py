@@ -18,6 +18,11 @@ import numpy as np
 from .errors import SnapmemError, check_real
 
 
+#: Use the compiled chain rule (snapmem.kernels.invariant_chain) for 1D float arrays; False
+#: keeps the numpy expressions below (the reference the tests compare with).
+compiled_chain = True
+
+
 @dataclass
 class Density:
     """Energy per unit reference volume and its derivatives, each of shape (E,).
@@ -82,6 +87,12 @@ class InvariantLaw(Law):
         i2_12 = 4.0 * lam1 * lam2
         i2_22 = 6.0 / (b2 * b2) + 2.0 * a2
         W, W1, W2, W11, W12, W22 = self.invariant_derivatives(I1, I2)
+        if compiled_chain and lam1.ndim == 1 and lam1.dtype == np.float64:
+            from .kernels import invariant_chain         # the same chain rule, fused in one pass
+            shape = lam1.shape
+            w1, w2, w11, w12, w22 = invariant_chain(
+                lam1, lam2, *(np.broadcast_to(np.asarray(x, dtype=float), shape) for x in (W1, W2, W11, W12, W22)))
+            return Density(W, w1, w2, w11, w12, w22)
         if self.linear:
             return Density(w=W, w1=W1 * i1_1 + W2 * i2_1, w2=W1 * i1_2 + W2 * i2_2,
                            w11=W1 * i1_11 + W2 * i2_11, w12=W1 * i1_12 + W2 * i2_12, w22=W1 * i1_22 + W2 * i2_22)

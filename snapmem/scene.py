@@ -116,6 +116,8 @@ class Scene:
             self.loads[key] = check_real(key, value)
         self.weight = 2.0 * np.pi * meridian.mid_radius * meridian.length * self.thickness  # dV_bar (E,)
         self._build_dof_map()
+        self._free_radius = np.ones(meridian.nodes, dtype=bool)          # nodes whose radius may move
+        self._free_radius[[d // 2 for d in self.fixed if d % 2 == 0 and d < 2 * meridian.nodes]] = False
 
     # ----------------------------------------------------------------------------------------
     # numbering of the free degrees of freedom and the scatter of local blocks into the band
@@ -227,6 +229,8 @@ class Scene:
         energy = 0.0
         grad_local = hess_local = None
         dens = self.density(kin, loads)
+        if order >= 1 and dens is not None and self.compiled and self._compilable:
+            return self._evaluate_compiled(q, kin, dens, loads, order)
         if dens is not None:
             energy += float(self.weight @ dens.w)
             if order >= 1:
@@ -268,6 +272,31 @@ class Scene:
             if self.bodies:
                 stiffness = self._bordered(stiffness, nodes)
         floor = 64.0 * np.finfo(float).eps * self.meridian.nodes * float(np.max(np.abs(grad_local)))
+        return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
+
+    #: Use the compiled assembly (snapmem.kernels.edge_assembly) where it applies: density terms
+    #: plus at most the pressure work, no node terms and no bodies. Set False to use the numpy
+    #: reference path (the tests compare the two).
+    compiled = True
+
+    @property
+    def _compilable(self) -> bool:
+        return (not self.node_terms and not self.bodies and len(self.edge_terms) <= 1
+                and all(type(t) is PressureWork for t in self.edge_terms))
+
+    def _evaluate_compiled(self, q, kin, dens, loads, order) -> Evaluation:
+        from .kernels import edge_assembly                 # numba: compiled on first use, cached on disk
+        pressure = loads["pressure"] if self.edge_terms else 0.0
+        m = self.meridian
+        gradient, band, volume, force = edge_assembly(
+            q, m.edges, kin.inv_length, kin.inv_mid_radius, self.weight, dens.w1, dens.w2, dens.w11, dens.w12,
+            dens.w22, pressure, self._hess_index, self._band_size, order)
+        energy = float(self.weight @ dens.w) - pressure * volume
+        stiffness = None
+        if order >= 2:
+            stiffness = BandedMatrix(band[: self._band_size].reshape(self.n_band, 3 * self.bandwidth + 1).T,
+                                     self.bandwidth)
+        floor = 64.0 * np.finfo(float).eps * m.nodes * force
         return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
 
     def _bordered(self, band: BandedMatrix, nodes) -> BodyMatrix:
@@ -325,8 +354,7 @@ class Scene:
         if not np.all(np.isfinite(q)):
             return "state has NaN or inf"
         r = q[: self.n_node_dofs: 2]
-        free_r = np.ones(r.size, dtype=bool)
-        free_r[[d // 2 for d in self.fixed if d % 2 == 0]] = False
+        free_r = self._free_radius
         if np.any(r[free_r] <= 0):
             return f"radius of node {int(np.flatnonzero(free_r & (r <= 0))[0])} is not positive"
         kin = self.kinematics(q)
