@@ -175,11 +175,14 @@ class _Shooter:
 
     # -- constitutive law with the electric term -------------------------------------------
     def derivatives(self, lam1, lam2):
-        """(W1, W2, W11, W12) of the total density at (lam1, lam2) [Pa]."""
+        """(W1, W2, W11, W12) of the total density at (lam1, lam2) [Pa] (floats or arrays)."""
+        scalar = np.ndim(lam1) == 0 and np.ndim(lam2) == 0
+        lam1, lam2 = np.asarray(lam1, dtype=float), np.asarray(lam2, dtype=float)
         d = self.law.density(lam1, lam2)
         a = self._a
-        return (d.w1 - 2.0 * a * lam1 * lam2 * lam2, d.w2 - 2.0 * a * lam1 * lam1 * lam2,
-                d.w11 - 2.0 * a * lam2 * lam2, d.w12 - 4.0 * a * lam1 * lam2)
+        out = (d.w1 - 2.0 * a * lam1 * lam2 * lam2, d.w2 - 2.0 * a * lam1 * lam1 * lam2,
+               d.w11 - 2.0 * a * lam2 * lam2, d.w12 - 4.0 * a * lam1 * lam2)
+        return tuple(float(v) for v in out) if scalar else out
 
     def reference(self, S):
         """(R, dR/dS, Z) of the reference meridian at arclength S [m]."""
@@ -229,6 +232,9 @@ class _Shooter:
         delta = opt.pole_offset * self.size
         R, _, _ = self.reference(delta)
         w1, w2, _, _ = self.derivatives(lam0, lam0)
+        if not w1 > 0.0:
+            raise SolverError(f"apex stretch {lam0:g}: the pole is not taut (W1 = {w1:.3g} <= 0; a "
+                              "voltage compresses the membrane there), no membrane solution")
         c = self.sign * p * lam0 * lam0 / (self.H * (w1 + w2))
         ds = lam0 * delta
         return delta, [lam0 * R, 0.5 * c * ds * ds, c * delta, lam0, 0.0]
@@ -372,6 +378,28 @@ class PlateODE(_Shooter):
             sol = self.shoot(lam0, p, options=options)
             out.append((float(lam0), p, float(-sol.y[1, -1])))
         return out
+
+    def pressure_extremum(self, rows, kind: str = "max", xtol: float = 1e-10) -> MeridianSolution:
+        """The pressure maximum (``kind='max'``, a limit point) or minimum of the branch.
+
+        ``rows`` are three consecutive rows (lam0, p, ...) of :meth:`branch` whose middle one has
+        the largest (max) or smallest (min) pressure. Brent's method then locates the extremum
+        of p(lam0), each pressure solved from the nearest known one; p is stationary there, so
+        its value is accurate to the shooting tolerance while lam0 is located to about
+        sqrt(xtol).
+        """
+        sign = -1.0 if kind == "max" else 1.0
+        known = {float(r[0]): float(r[1]) for r in rows}
+
+        def f(lam0):
+            near = min(known, key=lambda k: abs(k - lam0))
+            known[float(lam0)] = self.pressure(lam0, known[near])
+            return sign * known[float(lam0)] / self.mu
+
+        a, b, c = (float(r[0]) for r in rows)
+        res = minimize_scalar(f, bracket=(a, b, c), method="brent", options={"xtol": xtol})
+        lam0 = float(res.x)
+        return self.solution(lam0, known[lam0] if lam0 in known else self.pressure(lam0, known[b]))
 
     def trace(self, lam0_values) -> list[MeridianSolution]:
         """Sampled solutions at the given apex stretches (ascending, > 1), continuation in lam0."""

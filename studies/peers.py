@@ -1,6 +1,9 @@
 """Peers: snapmem against the classical scipy ODE shooting approach on the same curves, at equal error.
 
-    python studies/peers.py [--quick] [--repeats 3] [--out results/peers.csv]
+    OPENBLAS_NUM_THREADS=1 python studies/peers.py [--quick] [--repeats 3] [--out results/peers.csv]
+
+(On this 2-core machine a multithreaded OpenBLAS makes numpy's QR of the n x 6 blocks in
+snapmem's eigenvalue check about 50 times slower from n ~ 2000 up; one thread is faster.)
 
 Two curves, each traced over the same range by both methods in the same run:
 
@@ -15,8 +18,9 @@ continuation in the apex stretch or the outer radius, 30 points) at relative tol
 
 Error of a traced curve: the largest |p - p_ref(shape)| over its points, divided by the range's
 pressure scale (0.08 for the plate, the limit pressure for the torus), where p_ref is a cubic
-spline through a converged reference (the ODE at rtol = 1e-13 on 241 points graded towards the start;
-the run prints a bound on its interpolation error) and the shape is the apex deflection (plate) or the outer radius (torus), both
+spline through a converged reference (the ODE at rtol = 1e-13 on 241 points graded towards
+the start; the run prints a bound on its interpolation error) and the shape is the apex
+deflection (plate) or the outer radius (torus), both
 monotone along the branch. For each error target the cheapest setting of each method that
 meets it is timed (median of ``--repeats`` runs) and the ratio of the two times reported.
 Rows with ``table = run`` are every measured setting; ``table = equal_error`` the comparison.
@@ -25,6 +29,7 @@ Rows with ``table = run`` are every measured setting; ``table = equal_error`` th
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -85,23 +90,24 @@ def curve_error(shape, p, ref, span, scale) -> float:
 
 
 def timed(fn, repeats: int):
+    """(median, min) wall time [s] of ``repeats`` calls, and the last result."""
     times, out = [], None
     for _ in range(repeats):
         t0 = time.perf_counter()
         out = fn()
         times.append(time.perf_counter() - t0)
-    return float(np.median(times)), out
+    return float(np.median(times)), float(np.min(times)), out
 
 
 def sweep(curve, method, settings, fn, ref, span, scale, repeats, floor):
     """Time and measure every setting (cheap to accurate) until the error is below ``floor``."""
     rows = []
     for setting in settings:
-        seconds, (shape, p) = timed(lambda: fn(setting), repeats)
+        seconds, fastest, (shape, p) = timed(lambda: fn(setting), repeats)
         err = curve_error(shape, p, ref, span, scale)
         rows.append({"table": "run", "curve": curve, "method": method, "setting": setting,
                      "points": int(np.sum((shape >= span[0]) & (shape <= span[1]))), "error": err,
-                     "seconds": seconds})
+                     "seconds": seconds, "seconds_min": fastest})
         print(f"  {curve:5s} {method:7s} {setting:>8g}  error {err:.2e}  {seconds:8.3f} s", flush=True)
         if err < floor:
             break
@@ -151,6 +157,7 @@ def main(argv=None):
                                   "torus": {"Rb": 10, "Rs": 2, "H": 0.1, "c1": 0.4375, "c2": 0.0625,
                                             "r_o_range": [R_FIRST, R_END]},
                                   "ode_points": M_POINTS, "reference": "ODE rtol 1e-13, 241 graded points, cubic spline",
+                                  "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
                                   **meta})
     with pd.option_context("display.width", 200, "display.float_format", "{:.3g}".format):
         print(pd.DataFrame(summary).drop(columns="table").to_string(index=False))

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from snapmem import build_scene, equilibrium
+from snapmem.continuation import ContinuationOptions, trace
 from snapmem.exact import balloon_limit_point, balloon_pressure
-from snapmem.membrane_ode import ODEOptions, PlateODE, SphereODE, TorusODE
+from snapmem.materials import Gent
+from snapmem.membrane_ode import ODEOptions, PlateODE, SphereODE, TorusODE, e_hat
 
 TIGHT = ODEOptions(rtol=1e-13, atol=1e-15, pole_offset=1e-7)
 
@@ -75,7 +77,21 @@ def test_torus_converges_to_the_ode_solution_as_n_squared():
     assert ref["outer_radius"] == pytest.approx(12.33665044, abs=1e-7)
 
 
-def test_torus_limit_point_is_a_pressure_maximum():
+def snapmem_limit_pressures(scene_name, nodes, start_loads, until, **params):
+    """Pressures of the first located limit point of snapmem's traced branch, one per mesh."""
+    out = []
+    for n in nodes:
+        scene = build_scene(scene_name, nodes=n, **params)
+        start = equilibrium(scene, start_loads)
+        branch = trace(scene, "pressure", until=until, start=(start.q, start.loads),
+                       options=ContinuationOptions(stop_at_first_limit=True))
+        lp = branch.limit_points()
+        assert len(lp) and bool(lp["located"].iloc[0])
+        out.append(float(lp["pressure"].iloc[0]))
+    return np.array(out)
+
+
+def test_torus_limit_point_is_a_pressure_maximum_and_snapmem_converges_to_it():
     ode = TorusODE()
     lp = ode.limit_point()
     p_lp, r_lp = lp.pressure, lp.measures["outer_radius"]
@@ -84,3 +100,21 @@ def test_torus_limit_point_is_a_pressure_maximum():
     guess = (lp.measures["outer_stretch"], p_lp)
     for dr in (-1e-3, 1e-3):
         assert ode.at_outer_radius(r_lp + dr, guess)[1] < p_lp
+    # snapmem's located fold converges to it as N^-2 (errors 2.0e-5, 5.0e-6, 1.3e-6 of 0.0409)
+    nodes = np.array([100, 200, 400])
+    err = snapmem_limit_pressures("torus", nodes, {"pressure": 0.005}, {"outer_radius": 17.0}) - p_lp
+    assert 1.9 <= observed_order(nodes, err) <= 2.1, err
+    assert np.all(err > 0)
+
+
+def test_pump_limit_points_at_300_volts_match_snapmem():
+    """The Gent pump plate at 300 V: the ODE's pressure maximum, snapmem's fold converging to it."""
+    E = e_hat(300.0, 1e-4, 1e-10, 45e3)
+    ode = PlateODE(R=0.1, H=1e-4, law=Gent(45e3, 270.0), E_hat=E)
+    rows = [(lam0, ode.pressure(lam0, 79.0)) for lam0 in (2.0, 2.1, 2.2)]
+    lp = ode.pressure_extremum(rows, "max")
+    assert lp.pressure == pytest.approx(79.9027578619, rel=1e-9)
+    assert lp.measures["taut"]
+    nodes = np.array([51, 101, 201])
+    err = snapmem_limit_pressures("pump", nodes, {"pressure": 20.0}, {"stretch_max": 4.0}) - lp.pressure
+    assert 1.8 <= observed_order(nodes, err) <= 2.2, err
