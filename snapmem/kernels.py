@@ -167,3 +167,11 @@ def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12
         for k in range(16):
             band[band_index[k * n_edges + e]] += H[k]
     return gradient, band, volume, force
+
+
+@njit(cache=True, nogil=True)
+def invariant_chain_linear(lam1, lam2, W1, W2):
+    """:func:`invariant_chain` for a law linear in the invariants: W1, W2 constants, W11 = W12 = W22 = 0."""
+    n = lam1.size
+    zeros = np.zeros(n)
+    return invariant_chain(lam1, lam2, np.full(n, W1), np.full(n, W2), zeros, zeros, zeros)

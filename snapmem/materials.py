@@ -88,7 +88,9 @@ class InvariantLaw(Law):
         i2_22 = 6.0 / (b2 * b2) + 2.0 * a2
         W, W1, W2, W11, W12, W22 = self.invariant_derivatives(I1, I2)
         if compiled_chain and lam1.ndim == 1 and lam1.dtype == np.float64:
-            from .kernels import invariant_chain         # the same chain rule, fused in one pass
+            from .kernels import invariant_chain, invariant_chain_linear   # the same chain rule, one pass
+            if self.linear and np.ndim(W1) == 0 and np.ndim(W2) == 0:
+                return Density(W, *invariant_chain_linear(lam1, lam2, float(W1), float(W2)))
             shape = lam1.shape
             w1, w2, w11, w12, w22 = invariant_chain(
                 lam1, lam2, *(np.broadcast_to(np.asarray(x, dtype=float), shape) for x in (W1, W2, W11, W12, W22)))
