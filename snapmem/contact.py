@@ -224,6 +224,9 @@ class Ball(Contact):
         w = np.stack([-a[:, 0], zc - a[:, 1]], axis=1)                # c - a
         L2 = np.einsum("ij,ij->i", u, u)
         t = np.einsum("ij,ij->i", w, u) / L2
+        if order == 0:                               # distances only: the closest point of each segment
+            tc = np.clip(t, 0.0, 1.0)
+            return np.hypot(a[:, 0] + tc * u[:, 0], a[:, 1] + tc * u[:, 1] - zc) - self.radius, None, None
         end_a, end_b = t <= 0, t >= 1
         inner = ~(end_a | end_b)
         n = 5 if self.bodies else 4
