@@ -272,6 +272,30 @@ def cmd_replay(args) -> int:
     return 0
 
 
+def cmd_hysteresis(args) -> int:
+    from .hysteresis import hysteresis
+    from .results import write_table
+    params = parse_sets(args.set)
+    with_loads = ("voltage",) if args.control in ("voltage", "E_hat") else ()
+    scene = get_spec(args.scene).build(with_loads, **params)
+    loop = hysteresis(scene, args.control, peak=args.peak)
+    meta = {"command": "hysteresis", "scene": scene.name, "parameters": scene.parameters, "control": args.control,
+            "status": loop.status}
+    if args.out:
+        write_table(loop.table, args.out, meta)
+        write_table(loop.snaps, str(Path(args.out).with_suffix("")) + "_snaps.csv", meta)
+    if args.plot:
+        from .plotting import plot_hysteresis
+        x = next(iter(scene.probes), "u_max")
+        plot_hysteresis(loop.table, loop.snaps, x, args.control, args.plot,
+                        title=f"{scene.name}: hysteresis ({loop.status})")
+    print(f"status: {loop.status}")
+    for _, row in loop.snaps.iterrows():
+        print(f"{row['event']}: at {args.control} = {row['control_at_limit']:.8g}, settled at "
+              f"{row['control_settled']:.8g}, u_max {row['u_max_before']:.6g} -> {row['u_max_after']:.6g}")
+    return 0 if loop.status == "loop closed" else 1
+
+
 def cmd_bench(args) -> int:
     from .bench import run
     from .results import write_table
@@ -340,6 +364,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", metavar="FIG.png")
     p.set_defaults(func=cmd_fold)
 
+    p = sub.add_parser("hysteresis", help="up, snap, down, snap back: a hysteresis loop in one call")
+    p.add_argument("scene")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
+    p.add_argument("--control", choices=["pressure", "voltage", "E_hat"], default="pressure")
+    p.add_argument("--peak", type=float, help="control value reached after the snap (default 1.05 x the limit)")
+    p.add_argument("--out", metavar="LOOP.csv", help="the loop's branches (+ LOOP_snaps.csv)")
+    p.add_argument("--plot", metavar="FIG.png")
+    p.set_defaults(func=cmd_hysteresis)
+
     p = sub.add_parser("bench", help="benchmarks: Newton against the banded solve, whole jobs, designs per second")
     p.add_argument("--quick", action="store_true", help="small sizes (about a minute)")
     p.add_argument("--out", default="results/benchmark.csv", metavar="BENCH.csv")
@@ -381,6 +414,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("snapmem: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:                 # output piped into head and closed: not an error
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

@@ -108,3 +108,23 @@ def plot_family(table: pd.DataFrame, x: str, y: str, group: str, path, exact=Non
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def plot_hysteresis(table: pd.DataFrame, snaps: pd.DataFrame, x: str, y: str, path, title: str | None = None):
+    """A hysteresis loop: each traced segment named, each snap a dotted jump at its load."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for segment, sub in table.groupby("segment", sort=False):
+        plot_branch(sub, x, y, ax=ax, label=segment)
+    for _, s in snaps.iterrows():
+        ax.annotate("", xy=(s[f"{x}_after"], s["control_settled"]), xytext=(s[f"{x}_before"], s["control_settled"]),
+                    arrowprops={"arrowstyle": "->", "linestyle": ":", "color": "k"})
+        ax.text(0.5 * (s[f"{x}_before"] + s[f"{x}_after"]), s["control_settled"], s["event"], fontsize=8,
+                ha="center", va="bottom")
+    ax.set_xlabel(x)
+    ax.set_ylabel(y)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
