@@ -88,9 +88,9 @@ def _sweep_line(args):
     def scene_at(a, E):
         return build_scene("torus", nodes=nodes, H=H, aspect_ratio=a, E_hat=E, with_loads=("voltage",))
 
-    along_ratio = fold_curve(lambda a: scene_at(a, E_hats[0]), ratios)
+    along_ratio, folds = fold_curve(lambda a: scene_at(a, E_hats[0]), ratios, return_folds=True)
     for a in ratios:
-        start = along_ratio.attrs["folds"].get(a)
+        start = folds.get(a)
         if start is None:
             rows += [{"H": H, "aspect_ratio": a, "E_hat": E, "p_limit": np.nan, "exists": False} for E in E_hats]
             continue

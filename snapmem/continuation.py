@@ -779,7 +779,8 @@ class FoldOptions:
 
 def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "pressure",
                options: FoldOptions = FoldOptions(), trace_options: ContinuationOptions = ContinuationOptions(),
-               progress: Callable[[int, int], None] | None = None, start: tuple | None = None) -> pd.DataFrame:
+               progress: Callable[[int, int], None] | None = None, start: tuple | None = None,
+               return_folds: bool = False):
     """The curve of limit points of ``control`` as a second parameter runs through ``values``.
 
     The first limit point is found by tracing a branch; every next one by Newton on the
@@ -798,7 +799,9 @@ def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "press
         The continuation parameter whose limit is followed ('pressure', 'voltage', 'E_hat').
     start : (value, x, lam, phi), optional
         A limit point already known at ``value`` of ``scene_at`` (from another fold curve's
-        ``attrs["folds"]``): the curve continues from it instead of tracing a first branch.
+        folds): the curve continues from it instead of tracing a first branch.
+    return_folds : bool
+        Also return the limit points found, {value: (value, x, lam, phi)}, to start other curves.
 
     Returns
     -------
@@ -806,7 +809,7 @@ def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "press
         One row per value: ``value``, ``limit`` (the control at the limit point), ``exists``,
         ``method`` ('fold' or 'trace'), ``iterations``, ``status``, and the branch measures at the
         limit point (pressure, voltage, E_hat, volume, u_max, stretch_max, min_tension, ...).
-        ``table.attrs["folds"]`` maps each value with a limit point to its (value, x, lam, phi).
+        With ``return_folds``: (table, folds).
     """
     if control == "volume":
         raise SnapmemError("control = 'volume': volume control has no limit points to follow")
@@ -834,8 +837,7 @@ def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "press
     table = pd.DataFrame(rows)
     table = table[["value", "limit", "exists", "method", "iterations", "status"]
                   + [c for c in table.columns if c not in ("value", "limit", "exists", "method", "iterations", "status")]]
-    table.attrs["folds"] = folds
-    return table
+    return (table, folds) if return_folds else table
 
 
 def _fold_by_trace(scene, control, options, trace_options):
