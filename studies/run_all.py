@@ -25,6 +25,7 @@ STUDIES = [
     ("torus_limit_maps", ["--out", "results"]),
     ("torus_limit_convergence", ["--out", "results"]),
     ("robot_curves", ["--out", "results/robots"]),
+    ("fig6_8_robots", ["--out", "results", "--tables", "results/robots"]),
     ("fig9_timing", ["--out", "results"]),
     ("error_vs_runtime", ["--out", "results"]),
     ("stress_cases", ["--out", "results"]),

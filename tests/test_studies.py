@@ -79,3 +79,18 @@ def test_stress_cases_succeed_or_fail_clearly(design):
     row = stress.run_case(design)
     expected = "failed_clearly" if design["case"] == "no_equilibrium" else "ok"
     assert row["outcome"] == expected and row["message"]
+
+
+def test_fig6_8_robots(tmp_path):
+    robots = tmp_path / "robots"
+    robots.mkdir()
+    spec = importlib.util.spec_from_file_location("robot_curves", STUDIES / "robot_curves.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main(["--quick", "--out", str(robots)])
+    spec = importlib.util.spec_from_file_location("fig6_8_robots", STUDIES / "fig6_8_robots.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    cycle = module.main(["--quick", "--out", str(tmp_path), "--tables", str(robots)])
+    assert cycle["volume"].max() > 100 * cycle["volume"].iloc[0]          # the pump snapped through
+    assert (tmp_path / "fig7_gripper_rod_force.png").stat().st_size > 1000
