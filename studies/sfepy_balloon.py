@@ -1,7 +1,8 @@
 """Peer: SfePy's 3D membrane balloon against snapmem on the same balloon, at equal or better error.
 
     pip install 'snapmem[sfepy]'        # or: pip install sfepy
-    python studies/sfepy_balloon.py [--levels 0 1] [--quick] [--repeats 5] [--out results/sfepy_balloon.csv]
+    python studies/sfepy_balloon.py [--levels 0 1] [--solver default|pypardiso] [--quick]
+                                    [--repeats 5] [--out results/sfepy_balloon.csv]
 
 SfePy ships ``sfepy/examples/large_deformation/balloon.py``: a Mooney-Rivlin membrane
 (``dw_tl_membrane``, c1 = 3e5 Pa, c2 = 3e4 Pa, h0 = 0.01) on the surface of the unit ball, a
@@ -44,8 +45,12 @@ def exact(lam):
     return balloon_pressure(lam, R=BALLOON["R"], H=BALLOON["H"], c1=BALLOON["c1"], c2=BALLOON["c2"])
 
 
-def run_sfepy(level: int, workdir: Path) -> dict:
-    """Run SfePy's balloon example at one refinement level; its error against the exact curve."""
+def run_sfepy(level: int, workdir: Path, solver: str) -> dict:
+    """Run SfePy's balloon example at one refinement level; its error against the exact curve.
+
+    ``solver`` 'default' keeps the example's ``ls.auto_direct`` (MUMPS, UMFPACK or SuperLU,
+    whichever is installed first); 'pypardiso' replaces it by ``ls.pypardiso`` (MKL PARDISO).
+    """
     from sfepy.applications import solve_pde
     from sfepy.base.conf import ProblemConf, get_standard_keywords
     from sfepy.postprocess.time_history import extract_time_history
@@ -54,6 +59,10 @@ def run_sfepy(level: int, workdir: Path) -> dict:
     out_dir = workdir / f"level{level}"
     options = {"output_dir": str(out_dir), "refinement_level": level}
     conf = ProblemConf.from_file(example.__file__, *get_standard_keywords(), override={"options": options})
+    if solver == "pypardiso":
+        for struct in conf.solvers.values():
+            if struct.name == "ls":
+                struct.kind = "ls.pypardiso"
     t0 = time.perf_counter()
     pb, state = solve_pde(conf)
     seconds = time.perf_counter() - t0
@@ -65,7 +74,8 @@ def run_sfepy(level: int, workdir: Path) -> dict:
     variables = pb.equations.variables                 # unknowns of the solved system: free
     n_dofs = int(getattr(variables, "lcdi", None).n_dof_total if getattr(variables, "lcdi", None)
                  else variables.adi.n_dof_total)       # displacements + the one pressure
-    return {"method": "sfepy", "setting": level, "dofs": n_dofs, "points": int(keep.sum()),
+    linear = type(getattr(getattr(getattr(pb, "solver", None), "nls", None), "lin_solver", None)).__name__
+    return {"method": "sfepy", "setting": level, "solver": linear, "dofs": n_dofs, "points": int(keep.sum()),
             "lam_max": float(lam.max()), "error": float(rel.max()), "seconds": seconds}
 
 
@@ -86,6 +96,8 @@ def run_snapmem(nodes: int, repeats: int) -> dict:
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--levels", type=int, nargs="+", default=[0, 1], help="SfePy mesh refinement levels")
+    parser.add_argument("--solver", choices=("default", "pypardiso"), default="default",
+                        help="SfePy's linear solver: the example's own, or MKL PARDISO (pip install pypardiso)")
     parser.add_argument("--quick", action="store_true", help="level 0 only, 1 repeat")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", default="results/sfepy_balloon.csv")
@@ -100,7 +112,7 @@ def main(argv=None):
     rows = [run_snapmem(n, repeats) for n in NODES]
     with tempfile.TemporaryDirectory() as tmp:
         for level in levels:
-            row = run_sfepy(level, Path(tmp))
+            row = run_sfepy(level, Path(tmp), args.solver)
             print(f"sfepy level {level}: {row['dofs']} DOFs, error {row['error']:.2e}, "
                   f"{row['seconds']:.1f} s", flush=True)
             rows.append(row)
@@ -118,7 +130,7 @@ def main(argv=None):
                         "ratio_sfepy_over_snapmem": None if best is None else s.seconds / best.seconds})
     table = pd.concat([runs, pd.DataFrame(summary)], ignore_index=True)
     write_table(table, args.out, {"study": "sfepy_balloon", "sfepy": sfepy.__version__, "balloon": BALLOON,
-                                  "levels": levels, "repeats": repeats, "snapmem_nodes": NODES,
+                                  "levels": levels, "repeats": repeats, "solver": args.solver, "snapmem_nodes": NODES,
                                   "error": "max over steps of |p - p_exact(L)| / p_exact(L)"})
     with pd.option_context("display.width", 200, "display.float_format", "{:.3g}".format):
         print(runs.drop(columns="table").to_string(index=False))
