@@ -37,6 +37,7 @@ from .banded import BorderedMatrix
 from .errors import SnapmemError, SolverError, check_int, check_real
 from .newton import equilibrium, start_guess
 from .scene import Scene
+from .threads import single_threaded
 
 log = logging.getLogger(__name__)
 
@@ -430,6 +431,7 @@ class _Tracer:
         return self.finish(p, J, base, tangent, precise), J
 
 
+@single_threaded
 def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | None = None,
           options: ContinuationOptions = ContinuationOptions(), start: tuple | None = None,
           progress: Callable[[Point, dict], None] | None = None) -> Branch:
@@ -777,6 +779,7 @@ class FoldOptions:
     trace_until: tuple = (("stretch_max", 12.0),)
 
 
+@single_threaded
 def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "pressure",
                options: FoldOptions = FoldOptions(), trace_options: ContinuationOptions = ContinuationOptions(),
                progress: Callable[[int, int], None] | None = None, start: tuple | None = None,

@@ -55,6 +55,7 @@ import numpy as np
 from .errors import SnapmemError, SolverError, check_int, check_real
 from .newton import NewtonOptions, NewtonReport, newton, solve
 from .scene import Evaluation, Scene
+from .threads import single_threaded
 
 log = logging.getLogger(__name__)
 
@@ -356,6 +357,7 @@ def _newton_energy(fn, q0, free, tol, options: NewtonOptions, inadmissible, max_
     return q, ev, report
 
 
+@single_threaded
 def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, damping: float = 0.0,
              q0: np.ndarray | None = None, v0: np.ndarray | None = None, t0: float = 0.0,
              options: DynamicsOptions = DynamicsOptions(), damp_bodies: bool = False,

@@ -19,6 +19,7 @@ import pandas as pd
 from .continuation import ContinuationOptions, make_problem, trace
 from .errors import SnapmemError, check_real
 from .scene import Scene
+from .threads import single_threaded
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +45,7 @@ class Hysteresis:
     status: str
 
 
+@single_threaded
 def hysteresis(scene: Scene, control: str = "pressure", peak: float | None = None, push: float = 1e-3,
                rho: float | None = None, damping: float | None = None,
                options: ContinuationOptions = ContinuationOptions()) -> Hysteresis:

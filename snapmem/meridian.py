@@ -30,6 +30,7 @@ class Meridian:
     r: np.ndarray
     z: np.ndarray
     closed: bool = False
+    check_crossings: bool = field(default=True, repr=False)   # False for our own (simple) shapes
     edges: np.ndarray = field(init=False, repr=False)
     length: np.ndarray = field(init=False, repr=False)       # l_bar, shape (E,)
     mid_radius: np.ndarray = field(init=False, repr=False)   # r_m_bar, shape (E,)
@@ -61,7 +62,8 @@ class Meridian:
         if np.any(length <= 0):
             e = int(np.argmin(length))
             raise SnapmemError(f"meridian edge {e} has zero length: consecutive nodes must differ")
-        _check_simple(r, z, edges)
+        if self.check_crossings:
+            _check_simple(r, z, edges)
         for name, value in (("r", r), ("z", z), ("edges", edges), ("length", length),
                             ("mid_radius", 0.5 * (r[edges[:, 0]] + r[edges[:, 1]]))):
             value.setflags(write=False)
@@ -107,8 +109,6 @@ class Meridian:
 def _check_simple(r, z, edges):
     """Raise SnapmemError if two non-adjacent edges of the meridian cross."""
     e = edges.shape[0]
-    if e > 4000:          # O(E^2) check; large meshes come from our own constructors
-        return
     a = np.stack([r[edges[:, 0]], z[edges[:, 0]]], 1)
     b = np.stack([r[edges[:, 1]], z[edges[:, 1]]], 1)
     d = b - a
@@ -116,19 +116,23 @@ def _check_simple(r, z, edges):
     def cross(u, v):
         return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
-    ai, aj = a[:, None], a[None, :]
-    di, dj = d[:, None], d[None, :]
-    denom = cross(di, dj)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = cross(aj - ai, dj) / denom
-        t = cross(aj - ai, di) / denom
-    hit = (denom != 0) & (s > 0) & (s < 1) & (t > 0) & (t < 1)
-    adjacent = np.abs(np.arange(e)[:, None] - np.arange(e)[None, :]) <= 1
-    shares_node = (edges[:, None, 0] == edges[None, :, 1]) | (edges[:, None, 1] == edges[None, :, 0])
-    hit &= ~(adjacent | shares_node)
-    if np.any(hit):
-        i, j = np.argwhere(hit)[0]
-        raise SnapmemError(f"meridian is self-intersecting: edges {i} and {j} cross")
+    block = max(1, 2_000_000 // max(e, 1))          # pairs per block bounded: O(E^2) time, O(E) memory
+    for start in range(0, e, block):
+        rows = slice(start, min(e, start + block))
+        ai, aj = a[rows, None], a[None, :]
+        di, dj = d[rows, None], d[None, :]
+        denom = cross(di, dj)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = cross(aj - ai, dj) / denom
+            t = cross(aj - ai, di) / denom
+        hit = (denom != 0) & (s > 0) & (s < 1) & (t > 0) & (t < 1)
+        idx = np.arange(e)
+        adjacent = np.abs(idx[rows, None] - idx[None, :]) <= 1
+        shares_node = ((edges[rows, None, 0] == edges[None, :, 1]) | (edges[rows, None, 1] == edges[None, :, 0]))
+        hit &= ~(adjacent | shares_node)
+        if np.any(hit):
+            i, j = np.argwhere(hit)[0]
+            raise SnapmemError(f"meridian is self-intersecting: edges {start + i} and {j} cross")
 
 
 def disc(R: float, nodes: int) -> Meridian:
@@ -139,7 +143,7 @@ def disc(R: float, nodes: int) -> Meridian:
     R = check_real("R", R, minimum=0.0, min_inclusive=False)
     nodes = check_int("nodes", nodes, minimum=3)
     r = np.linspace(R, 0.0, nodes)
-    return Meridian(r, np.zeros(nodes))
+    return Meridian(r, np.zeros(nodes), check_crossings=False)
 
 
 def sphere(R: float, nodes: int) -> Meridian:
@@ -153,7 +157,7 @@ def sphere(R: float, nodes: int) -> Meridian:
     if nodes % 2:
         z[nodes // 2] = 0.0
         r[nodes // 2] = R
-    return Meridian(r, z)
+    return Meridian(r, z, check_crossings=False)
 
 
 def torus(Rb: float, Rs: float, nodes: int) -> Meridian:
@@ -171,4 +175,4 @@ def torus(Rb: float, Rs: float, nodes: int) -> Meridian:
     z = Rs * np.sin(theta)
     if nodes % 2 == 0:
         z[nodes // 2] = 0.0
-    return Meridian(r, z, closed=True)
+    return Meridian(r, z, closed=True, check_crossings=False)

@@ -18,6 +18,7 @@ import numpy as np
 
 from .errors import SnapmemError, SolverError, check_array, check_int, check_real
 from .scene import Evaluation, Scene
+from .threads import single_threaded
 
 log = logging.getLogger(__name__)
 
@@ -232,6 +233,7 @@ def start_guess(scene: Scene, loads: Mapping[str, float]) -> np.ndarray:
 LOAD_ORDER = ("pressure", "voltage")
 
 
+@single_threaded
 def equilibrium(scene: Scene, loads: Mapping[str, float] | None = None,
                 options: NewtonOptions = NewtonOptions(), min_fraction_step: float = 1e-4) -> Equilibrium:
     """The equilibrium reached by loading quasi-statically from rest to ``loads``.
