@@ -243,12 +243,31 @@ def _died(exitcode) -> dict:
     return _failed("crashed", f"the process running the design died (exit code {exitcode})")
 
 
+_WARM = set()
+
+
+def _warm_up(function):
+    """Call ``function.warmup()`` once per process, if it has one: what it loads or compiles
+    (numba kernels, imports) is then inherited by every forked child instead of redone per design."""
+    key = (type(function).__module__, type(function).__qualname__, repr(getattr(function, "meta", None)))
+    if key in _WARM:
+        return
+    _WARM.add(key)
+    warm = getattr(function, "warmup", None)
+    if callable(warm):
+        try:
+            warm()
+        except Exception as exc:                     # a warm-up is only an optimisation
+            log.debug("warm-up of %r failed: %s", function, exc)
+
+
 def _call_isolated(function, design: dict, timeout: float | None) -> dict:
     """``_call`` in a forked child, killed after ``timeout`` seconds (for Dask workers, whose
     tasks run in threads that cannot be stopped, and so that a crash takes down only the child,
     as in the local pool). Inline where there is no fork."""
     if not hasattr(os, "fork"):
         return _call(function, design)
+    _warm_up(function)
     read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:                                                   # child
@@ -511,6 +530,8 @@ def _run_pool(function, tasks, workers: int, timeout: float | None):
             worker.process.join()
 
     pending = deque(tasks)
+    if method == "fork":
+        _warm_up(function)                                 # once here, inherited by every worker
     for _ in range(min(workers, len(pending)) or 1):
         pool.append(start())
     try:
@@ -628,6 +649,8 @@ def sweep(function: Callable[[dict], Mapping], grid, out, workers: int | None = 
     ----------
     function : callable
         design (dict) -> dict of scalar outputs, optionally with ``status`` and ``message``.
+        If it has a ``warmup()`` method, that runs once per process before designs are forked
+        off it (e.g. to compile kernels once instead of once per design).
         It runs in other processes: in the local pool it is inherited by fork (any callable);
         on Dask it is sent with cloudpickle.
     grid : mapping or list of dict
@@ -785,6 +808,12 @@ class EquilibriumJob:
         scene = build_scene(self.scene)             # the defaults: only the names matter here
         names = scene.measures(scene.reference_state())
         return [name for name in names if name != "taut"] + list(self.REPORT)
+
+    def warmup(self):
+        """Solve one small equilibrium so that kernels are compiled before worker processes fork."""
+        from .newton import equilibrium
+        from .scenes import build_scene
+        equilibrium(build_scene(self.scene, nodes=7, pressure=1e-4))
 
     def __call__(self, design: dict) -> dict:
         from .newton import equilibrium
