@@ -313,7 +313,7 @@ def _snap_by_tracing(scene, last: Equilibrium, name, value):
     except SnapmemError as exc:
         log.info("snap-through trace failed: %s", exc)
         return None
-    except SolverError as exc:
+    except RuntimeError as exc:       # SolverError, or a root finder's "failed to converge" inside the trace
         log.info("snap-through trace failed: %s", exc)
         return None
     end = branch.states[-1]
