@@ -165,6 +165,13 @@ RESULTS = [
      ["no equilibrium on the load path beyond voltage"]),
     ("Gent past its lock at the start", past_gent_lock, None, "left_domain",
      ["left the model's domain", "starting state", "Gent(mu=1.0, Jlim=1.0)"]),
+    # found by the soak: the snap-through trace's root finder gave up and raised (scipy RuntimeError)
+    ("suction on a thin balloon", lambda: equilibrium(build_scene(
+        "balloon", nodes=13, material="neo_hookean", c1=0.35253144268545156, H=0.03710449855837486,
+        pressure=-0.0013605419352743825)),
+     ["equilibrium", "balloon", "--set", "nodes=13", "--set", "material=neo_hookean", "--set", "c1=0.35253144268545156",
+      "--set", "H=0.03710449855837486", "--pressure", "-0.0013605419352743825"],
+     "no_equilibrium", ["no equilibrium on the load path beyond pressure"]),
 ]
 
 
