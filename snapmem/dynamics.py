@@ -44,6 +44,7 @@ piecewise-linear (t, value) points per load.
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import time
@@ -291,70 +292,9 @@ class _Stepper:
             guess = q if current is None else current
         # the inertia term's rounding floor, eps |q| M / h^2, grows as h falls: keep the tolerance above it
         tol = max(self.tol, 1e3 * np.finfo(float).eps * float(np.max(inertia_free)) * self.scene.meridian.size)
-        solver = newton if self.options.line_search == "residual" else _newton_energy
+        solver = functools.partial(newton, merit=self.options.line_search)
         y, _ev, report = solver(assemble, guess, free, tol, self.options.newton, scene.inadmissible, scene.max_step)
         return y, report
-
-
-def _newton_energy(fn, q0, free, tol, options: NewtonOptions, inadmissible, max_step):
-    """Newton on a minimisation (a time step's incremental potential), Armijo on the energy.
-
-    The same iteration as :func:`snapmem.newton.newton` (one band solve per iteration, steps cut
-    to stay in the domain and short of any contact gap, converged at max(tol, residual floor))
-    but a step is accepted when it lowers the energy by the Armijo fraction of its slope, or
-    halves the residual. Far fewer cuts than Armijo on |R|^2, whose full Newton steps are often
-    rejected in strongly nonlinear states. Returns (q, evaluation, NewtonReport).
-    """
-    q = np.array(q0, dtype=float)
-    why = inadmissible(q)
-    if why is not None:
-        return q, None, NewtonReport(False, 0, float("nan"), f"left the model's domain: the starting state is outside it ({why})")
-    ev = fn(q)
-    norm = float(np.max(np.abs(ev.residual))) if ev.residual.size else 0.0
-    report = NewtonReport(False, 0, norm, "max iterations")
-    last_step = np.inf
-    for _ in range(options.max_iterations):
-        report.history.append(norm)
-        floor_tol = max(tol, ev.residual_floor)
-        if norm <= floor_tol or (last_step <= 1e-10 * np.max(np.abs(q)) and norm <= 1e3 * floor_tol):
-            report.converged, report.reason = True, "converged"
-            break
-        if not np.isfinite(norm):
-            report.reason = "residual is not finite"
-            break
-        lu = ev.stiffness.lu()
-        if lu.singular:
-            report.reason = "singular tangent stiffness"
-            break
-        dx = lu.solve(-ev.residual)
-        dq = np.zeros_like(q)
-        dq[free] = dx
-        alpha = min(1.0, max_step(q, dq))
-        slope = float(ev.residual @ dx)
-        report.iterations += 1
-        outside = None
-        for _cut in range(options.max_cuts + 1):
-            trial = q + alpha * dq
-            outside = inadmissible(trial)
-            if outside is None:
-                ev_trial = fn(trial)
-                trial_norm = float(np.max(np.abs(ev_trial.residual)))
-                if np.isfinite(ev_trial.energy) and np.isfinite(trial_norm) and (
-                        ev_trial.energy <= ev.energy + 1e-4 * alpha * min(slope, 0.0) or trial_norm <= 0.5 * norm):
-                    break
-            alpha *= 0.5
-            report.step_cuts += 1
-        else:
-            report.reason = ("line search failed: no step lowers the energy" if outside is None else
-                             f"left the model's domain: every trial step was outside it ({outside})")
-            break
-        q, ev = trial, ev_trial
-        norm = trial_norm
-        last_step = alpha * float(np.max(np.abs(dx)))
-    report.residual_norm = norm
-    if not report.converged and norm <= max(tol, ev.residual_floor):
-        report.converged, report.reason = True, "converged"
-    return q, ev, report
 
 
 @single_threaded

@@ -112,7 +112,7 @@ class NewtonReport:
 def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.ndarray, free: np.ndarray,
            tol: float, options: NewtonOptions = NewtonOptions(),
            inadmissible: Callable[[np.ndarray], str | None] = lambda q: None,
-           max_step: Callable[[np.ndarray, np.ndarray], float] = lambda q, dq: 1.0):
+           max_step: Callable[[np.ndarray, np.ndarray], float] = lambda q, dq: 1.0, merit: str = "residual"):
     """Solve R(q) = 0 on the free degrees of freedom by damped Newton.
 
     Parameters
@@ -125,6 +125,11 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
         Free degree of freedom for each band position.
     tol : float
         Absolute tolerance on max |R|.
+    merit : {'residual', 'energy'}
+        When a step is accepted: 'residual', Armijo on |R|^2 (for any equilibrium, stable or
+        not); 'energy', for a minimisation (a time step's incremental potential): when it lowers
+        the energy by the Armijo fraction of its slope, or halves max |R| (far fewer cuts: full
+        Newton steps in strongly nonlinear states often raise |R|^2 while lowering the energy).
 
     Returns
     -------
@@ -163,7 +168,8 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
         dq = np.zeros_like(q)
         dq[free] = dx
         alpha = min(1.0, max_step(q, dq))
-        merit = float(ev.residual @ ev.residual)
+        squared = float(ev.residual @ ev.residual)
+        slope = float(ev.residual @ dx)
         report.iterations += 1
         outside = None
         for _cut in range(options.max_cuts + 1):
@@ -171,13 +177,20 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
             outside = inadmissible(trial)
             if outside is None:
                 ev_trial = residual_and_jacobian(trial)
-                trial_merit = float(ev_trial.residual @ ev_trial.residual)
-                if np.isfinite(trial_merit) and trial_merit <= (1.0 - 1e-4 * alpha) * merit:
-                    break
+                if merit == "energy":
+                    trial_norm = _norm(ev_trial.residual)
+                    if np.isfinite(ev_trial.energy) and np.isfinite(trial_norm) and (
+                            ev_trial.energy <= ev.energy + 1e-4 * alpha * min(slope, 0.0) or trial_norm <= 0.5 * norm):
+                        break
+                else:
+                    trial_squared = float(ev_trial.residual @ ev_trial.residual)
+                    if np.isfinite(trial_squared) and trial_squared <= (1.0 - 1e-4 * alpha) * squared:
+                        break
             alpha *= 0.5
             report.step_cuts += 1
         else:
-            report.reason = ("line search failed: no step reduces the residual" if outside is None else
+            what = "lowers the energy" if merit == "energy" else "reduces the residual"
+            report.reason = (f"line search failed: no step {what}" if outside is None else
                              f"left the model's domain: every trial step was outside it ({outside})")
             break
         q, ev = trial, ev_trial
