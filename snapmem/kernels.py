@@ -170,8 +170,34 @@ def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12
 
 
 @njit(cache=True, nogil=True)
-def invariant_chain_linear(lam1, lam2, W1, W2):
-    """:func:`invariant_chain` for a law linear in the invariants: W1, W2 constants, W11 = W12 = W22 = 0."""
+def linear_law_density(lam1, lam2, W1, W2):
+    """W = W1 (I1 - 3) + W2 (I2 - 3) with constant W1, W2 (neo-Hookean, Mooney-Rivlin) and its
+    derivatives in (lam1, lam2), in one pass: returns (w, w1, w2, w11, w12, w22), each (E,)."""
     n = lam1.size
     zeros = np.zeros(n)
-    return invariant_chain(lam1, lam2, np.full(n, W1), np.full(n, W2), zeros, zeros, zeros)
+    w = np.empty(n)
+    for e in range(n):
+        a2, b2 = lam1[e] * lam1[e], lam2[e] * lam2[e]
+        w[e] = W1 * (a2 + b2 + 1.0 / (a2 * b2) - 3.0) + W2 * (1.0 / a2 + 1.0 / b2 + a2 * b2 - 3.0)
+    w1, w2, w11, w12, w22 = invariant_chain(lam1, lam2, np.full(n, W1), np.full(n, W2), zeros, zeros, zeros)
+    return w, w1, w2, w11, w12, w22
+
+
+@njit(cache=True, nogil=True)
+def edge_kinematics(q, edges, inv_length, inv_mid_radius):
+    """End coordinates, edge vector, length and stretches of every edge in one pass.
+
+    The arithmetic of :meth:`snapmem.kinematics.EdgeKinematics.of` (which documents it).
+    Returns ra, za, rb, zb, dr, dz, l, lam1, lam2, each of shape (E,).
+    """
+    n = edges.shape[0]
+    ra, za, rb, zb = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    dr, dz, l, lam1, lam2 = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    for e in range(n):
+        a, b = edges[e, 0], edges[e, 1]
+        ra[e], za[e], rb[e], zb[e] = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
+        dr[e], dz[e] = rb[e] - ra[e], zb[e] - za[e]
+        l[e] = np.sqrt(dr[e] * dr[e] + dz[e] * dz[e])
+        lam1[e] = l[e] * inv_length[e]
+        lam2[e] = 0.5 * (ra[e] + rb[e]) * inv_mid_radius[e]
+    return ra, za, rb, zb, dr, dz, l, lam1, lam2

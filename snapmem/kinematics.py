@@ -13,6 +13,10 @@ import numpy as np
 from .meridian import Meridian
 
 
+#: Use the compiled kernel (snapmem.kernels.edge_kinematics); False keeps the numpy expressions.
+compiled = True
+
+
 @dataclass
 class EdgeKinematics:
     """Current edge geometry and in-plane stretches of every edge.
@@ -45,13 +49,16 @@ class EdgeKinematics:
 
     @classmethod
     def of(cls, meridian: Meridian, q: np.ndarray) -> "EdgeKinematics":
+        inv_length = meridian.inverse_length
+        inv_mid_radius = meridian.inverse_mid_radius
+        if compiled and q.dtype == np.float64 and q.ndim == 1:
+            from .kernels import edge_kinematics            # the same arithmetic in one pass
+            return cls(*edge_kinematics(q, meridian.edges, inv_length, inv_mid_radius), inv_length, inv_mid_radius)
         a, b = meridian.edges[:, 0], meridian.edges[:, 1]
         r, z = q[0::2], q[1::2]
         ra, za, rb, zb = r[a], z[a], r[b], z[b]
         dr, dz = rb - ra, zb - za
         l = np.sqrt(dr * dr + dz * dz)
-        inv_length = 1.0 / meridian.length
-        inv_mid_radius = 1.0 / meridian.mid_radius
         return cls(ra, za, rb, zb, dr, dz, l, l * inv_length, 0.5 * (ra + rb) * inv_mid_radius,
                    inv_length, inv_mid_radius)
 

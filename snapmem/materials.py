@@ -71,6 +71,10 @@ class InvariantLaw(Law):
         raise NotImplementedError
 
     def density(self, lam1, lam2) -> Density:
+        if compiled_chain and self.linear and lam1.ndim == 1 and lam1.dtype == np.float64:
+            from .kernels import linear_law_density       # W = W1 (I1 - 3) + W2 (I2 - 3), one pass
+            _, W1, W2, _, _, _ = self.invariant_derivatives(3.0, 3.0)
+            return Density(*linear_law_density(lam1, lam2, float(W1), float(W2)))
         a2, b2 = lam1 * lam1, lam2 * lam2
         inv = 1.0 / (a2 * b2)                      # lam3^2
         I1 = a2 + b2 + inv
@@ -88,9 +92,7 @@ class InvariantLaw(Law):
         i2_22 = 6.0 / (b2 * b2) + 2.0 * a2
         W, W1, W2, W11, W12, W22 = self.invariant_derivatives(I1, I2)
         if compiled_chain and lam1.ndim == 1 and lam1.dtype == np.float64:
-            from .kernels import invariant_chain, invariant_chain_linear   # the same chain rule, one pass
-            if self.linear and np.ndim(W1) == 0 and np.ndim(W2) == 0:
-                return Density(W, *invariant_chain_linear(lam1, lam2, float(W1), float(W2)))
+            from .kernels import invariant_chain          # the same chain rule, one pass
             shape = lam1.shape
             w1, w2, w11, w12, w22 = invariant_chain(
                 lam1, lam2, *(np.broadcast_to(np.asarray(x, dtype=float), shape) for x in (W1, W2, W11, W12, W22)))

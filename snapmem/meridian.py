@@ -8,6 +8,7 @@ Meridians are traversed so that the enclosed region lies on the left in the (r, 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -68,6 +69,16 @@ class Meridian:
                             ("mid_radius", 0.5 * (r[edges[:, 0]] + r[edges[:, 1]]))):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+
+    @functools.cached_property
+    def inverse_length(self) -> np.ndarray:
+        """1 / l_bar of every edge, shape (E,)."""
+        return 1.0 / self.length
+
+    @functools.cached_property
+    def inverse_mid_radius(self) -> np.ndarray:
+        """1 / r_m_bar of every edge, shape (E,)."""
+        return 1.0 / self.mid_radius
 
     @property
     def nodes(self) -> int:

@@ -113,7 +113,7 @@ def test_every_law_has_an_example():
                                         ("balloon", {"material": "yeoh", "c2": -0.01, "c3": 0.002})])
 def test_compiled_assembly_matches_the_numpy_reference(name, extra, rng, monkeypatch):
     """The compiled kernels (snapmem.kernels) against the numpy expressions they fuse."""
-    from snapmem import build_scene, materials
+    from snapmem import build_scene, kinematics, materials
     scene = build_scene(name, nodes=41, pressure=0.013, **extra)
     assert scene._compilable
     q = scene.reference_state() * 1.2
@@ -121,6 +121,7 @@ def test_compiled_assembly_matches_the_numpy_reference(name, extra, rng, monkeyp
     fast = scene.evaluate(q)
     monkeypatch.setattr(Scene, "compiled", False)
     monkeypatch.setattr(materials, "compiled_chain", False)
+    monkeypatch.setattr(kinematics, "compiled", False)
     scene._kinematics_cache = None
     slow = scene.evaluate(q)
     assert fast.energy == pytest.approx(slow.energy, rel=1e-13)
