@@ -23,9 +23,8 @@ def main(argv=None):
                "error", "message"]
     table = table[[c for c in columns if c in table.columns]]
     save(args, "stress_cases", table)
-    path.unlink()
-    for sidecar in args.out.glob("stress_cases.sweep.csv*"):
-        sidecar.unlink()
+    for leftover in args.out.glob("stress_cases.sweep*"):       # the sweep's own file and sidecars
+        leftover.unlink()
     print(table[["case", "parameters", "outcome", "wall_time_s"]].to_string(index=False))
     return table
 
