@@ -23,6 +23,13 @@ from .errors import SnapmemError, check_real
 compiled_chain = True
 
 
+def _compilable(lam1, lam2) -> bool:
+    """Whether the compiled kernels apply: two 1D float64 arrays of one shape (else numpy, which
+    takes scalars and any shape)."""
+    return (isinstance(lam1, np.ndarray) and isinstance(lam2, np.ndarray) and lam1.ndim == 1
+            and lam1.dtype == np.float64 and lam2.dtype == np.float64 and lam1.shape == lam2.shape)
+
+
 @dataclass
 class Density:
     """Energy per unit reference volume and its derivatives, each of shape (E,).
@@ -71,7 +78,7 @@ class InvariantLaw(Law):
         raise NotImplementedError
 
     def density(self, lam1, lam2) -> Density:
-        if compiled_chain and self.linear and lam1.ndim == 1 and lam1.dtype == np.float64:
+        if compiled_chain and self.linear and _compilable(lam1, lam2):
             from .kernels import linear_law_density       # W = W1 (I1 - 3) + W2 (I2 - 3), one pass
             _, W1, W2, _, _, _ = self.invariant_derivatives(3.0, 3.0)
             return Density(*linear_law_density(lam1, lam2, float(W1), float(W2)))
@@ -91,7 +98,7 @@ class InvariantLaw(Law):
         i2_12 = 4.0 * lam1 * lam2
         i2_22 = 6.0 / (b2 * b2) + 2.0 * a2
         W, W1, W2, W11, W12, W22 = self.invariant_derivatives(I1, I2)
-        if compiled_chain and lam1.ndim == 1 and lam1.dtype == np.float64:
+        if compiled_chain and _compilable(lam1, lam2):
             from .kernels import invariant_chain          # the same chain rule, one pass
             shape = lam1.shape
             w1, w2, w11, w12, w22 = invariant_chain(

@@ -128,3 +128,13 @@ def test_compiled_assembly_matches_the_numpy_reference(name, extra, rng, monkeyp
     np.testing.assert_allclose(fast.gradient, slow.gradient, rtol=0, atol=1e-13 * np.abs(slow.gradient).max())
     K1, K2 = fast.stiffness.to_dense(), slow.stiffness.to_dense()
     np.testing.assert_allclose(K1, K2, rtol=0, atol=1e-13 * np.abs(K2).max())
+
+
+@pytest.mark.parametrize("law", list(LAWS))
+def test_laws_take_scalars_and_arrays_alike(law):
+    """Scalars (as an ODE solver passes them) take the numpy path, arrays the compiled one."""
+    model = make_law(law, **EXAMPLES[law])
+    arrays = model.density(np.array([1.3, 1.1]), np.array([1.2, 0.9]))
+    scalar = model.density(1.3, 1.2)
+    for name in ("w", "w1", "w2", "w11", "w12", "w22"):
+        assert float(getattr(scalar, name)) == pytest.approx(float(getattr(arrays, name)[0]), rel=1e-13)
