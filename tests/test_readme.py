@@ -15,7 +15,10 @@ def test_readme_python_block_runs(index, tmp_path, monkeypatch):
     if '__name__ == "__main__"' in BLOCKS[index]:
         pytest.skip("a block for a process pool runs as a script in tests/test_sweep.py")
     monkeypatch.chdir(tmp_path)
-    exec(compile(BLOCKS[index], f"README block {index}", "exec"), {})
+    namespace = {}
+    exec(compile(BLOCKS[index], f"README block {index}", "exec"), namespace)   # the block's own asserts run
+    assigned = set(re.findall(r"^(\w+)\s*=", BLOCKS[index], flags=re.M))
+    assert assigned and assigned <= set(namespace)            # it ran to its end and bound its results
 
 
 def test_readme_has_blocks_with_assertions():
