@@ -79,12 +79,13 @@ class BandedMatrix:
         return eig_banded(self.lower(), lower=True, eigvals_only=True, select="i",
                           select_range=(0, k - 1), check_finite=False)
 
-    def eigenvalues_near_zero(self, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13):
+    def eigenvalues_near_zero(self, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13,
+                              max_iterations: int = 40):
         """The k eigenvalues of smallest magnitude, ascending, and their vectors: O(n b^2).
 
         See :func:`eigenvalues_near_zero`.
         """
-        return eigenvalues_near_zero(self, k, start, lu, tol)
+        return eigenvalues_near_zero(self, k, start, lu, tol, max_iterations=max_iterations)
 
     def negative_count(self, known: np.ndarray | None = None) -> int:
         """Number of negative eigenvalues (the inertia index), from the pivot signs of a band
@@ -145,9 +146,10 @@ class BorderedMatrix:
     def lu(self) -> "BorderedLU":
         return BorderedLU(self)
 
-    def eigenvalues_near_zero(self, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13):
+    def eigenvalues_near_zero(self, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13,
+                              max_iterations: int = 40):
         """As :meth:`BandedMatrix.eigenvalues_near_zero` (for a symmetric bordering)."""
-        return eigenvalues_near_zero(self, k, start, lu, tol)
+        return eigenvalues_near_zero(self, k, start, lu, tol, max_iterations=max_iterations)
 
 
 class BorderedLU:

@@ -169,8 +169,14 @@ class Scene:
         return self.free.size
 
     def reference_state(self) -> np.ndarray:
-        """q of the reference shape (and the bodies at their start heights), shape (2N + bodies,)."""
-        return np.concatenate([self.meridian.q, [b.z0 for b in self.bodies]])
+        """q of the reference shape (and the bodies at their start heights), shape (2N + bodies,).
+
+        A fresh copy each call (callers fill it in); the array itself is built once.
+        """
+        cached = self.__dict__.get("_reference")
+        if cached is None:
+            cached = self._reference = np.concatenate([self.meridian.q, [b.z0 for b in self.bodies]])
+        return cached.copy()
 
     def node_coordinates(self, q: np.ndarray) -> np.ndarray:
         """Node positions (r_i, z_i) of a state, shape (N, 2) (a view of q)."""
