@@ -35,7 +35,7 @@ from scipy.optimize import brentq
 
 from .banded import BorderedMatrix
 from .errors import SnapmemError, SolverError, check_int, check_real
-from .newton import equilibrium, start_guess
+from .newton import equilibrium
 from .scene import Scene
 from .threads import single_threaded
 

@@ -49,12 +49,12 @@ import json
 import logging
 import time
 from dataclasses import asdict, dataclass, field
-from typing import Callable, Mapping
+from typing import Callable
 
 import numpy as np
 
 from .errors import SnapmemError, SolverError, check_int, check_real
-from .newton import NewtonOptions, NewtonReport, newton, solve
+from .newton import NewtonOptions, newton, solve
 from .scene import Evaluation, Scene
 from .threads import single_threaded
 

@@ -13,7 +13,6 @@ import logging
 import math
 from dataclasses import dataclass, replace
 
-import numpy as np
 import pandas as pd
 
 from .continuation import ContinuationOptions, make_problem, trace

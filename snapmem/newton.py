@@ -16,7 +16,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .errors import SnapmemError, SolverError, check_array, check_int, check_real
+from .errors import SnapmemError, check_array, check_int, check_real
 from .scene import Evaluation, Scene
 from .threads import single_threaded
 

@@ -1,7 +1,6 @@
 """Continuation through limit points, against the exact balloon and between controls."""
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from snapmem import build_scene, exact

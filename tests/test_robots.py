@@ -6,7 +6,7 @@ import pytest
 
 from snapmem import build_scene
 from snapmem.cli import main
-from snapmem.dynamics import DynamicsOptions, Trajectory, simulate
+from snapmem.dynamics import Trajectory, simulate
 from snapmem.robots import ROBOTIC_SCENES, experiment, resting, run
 from snapmem.scenes import SCENES
 
