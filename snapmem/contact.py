@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .contact_kernels import ball_edge_barrier, ball_edge_gaps, ball_min_gap
 from .errors import check_real
 from .terms import NodeLocal, NodeTerm, RigidBody
 
@@ -82,29 +83,21 @@ class Contact(NodeTerm):
         return self.gap(self._selected(x), y, 0)[0]
 
     def node_local(self, x, y, area, loads, order):
-        k = len(self.bodies)
         idx = np.arange(x.shape[0]) if self._index is None else self._index
         d = self.gap(x[idx], y, 0)[0]
         idx = idx[d < self.dhat]                   # only nodes within the barrier width feel it
         d, dg, dh = self.gap(x[idx], y, order)
         c = self.kappa * area[idx] / self.dhat
         b, b1, b2 = barrier(d, self.dhat, order)
-        out = NodeLocal(float(c @ b))
+        out = NodeLocal(float(c @ b) + self.body_energy(y), nodes=idx)
         out.body_gradient, out.body_hessian = self.body_energy_derivatives(y, order)
-        out.energy += self.body_energy(y)
         if order < 1:
             return out
-        n = x.shape[0]
-        g = np.zeros((n, 2 + k))
-        g[idx] = (c * b1)[:, None] * dg
-        out.gradient = g
+        out.gradient = (c * b1)[:, None] * dg
         if order >= 2:
-            h = np.zeros((n, 2 + k, 2 + k))
-            local = (c * b2)[:, None, None] * dg[:, :, None] * dg[:, None, :]
+            out.hessian = (c * b2)[:, None, None] * dg[:, :, None] * dg[:, None, :]
             if dh is not None:
-                local += (c * b1)[:, None, None] * dh
-            h[idx] = local
-            out.hessian = h
+                out.hessian += (c * b1)[:, None, None] * dh
         return out
 
     def body_energy(self, y) -> float:
@@ -212,6 +205,7 @@ class Ball(Contact):
         if self.meridian is not None:
             m = self.meridian
             object.__setattr__(self, "_edge_area", 2.0 * np.pi * m.mid_radius * m.length)
+            object.__setattr__(self, "_edge_coef", self.kappa * self._edge_area / self.dhat)
 
     # ---- edges: point-segment distance of the centre c = (0, zb) to each edge [a, b]
     def edge_gap(self, x, y, order, which=None):
@@ -315,10 +309,12 @@ class Ball(Contact):
 
     def _edges_clear(self, x, y, dx, dy, alpha):
         """Largest alpha' <= alpha (halving) at which no edge reaches the ball, keeping 10% of each gap."""
-        d0 = self.edge_gap(x, y, 0)[0]
+        zc, dzc = self._centre(y), (float(dy[0]) if self.bodies else 0.0)
+        edges = self.meridian.edges
+        floor = (1.0 - FRACTION_TO_BOUNDARY) * min(float(ball_min_gap(x, dx, 0.0, edges, zc, dzc, self.radius)),
+                                                     self.dhat)
         for _ in range(40):
-            d = self.edge_gap(x + alpha * dx, y + alpha * dy, 0)[0]
-            if np.all(d > (1.0 - FRACTION_TO_BOUNDARY) * np.minimum(d0, self.dhat)):
+            if ball_min_gap(x, dx, alpha, edges, zc, dzc, self.radius) > floor:
                 return alpha
             alpha *= 0.5
         return alpha
@@ -326,35 +322,25 @@ class Ball(Contact):
     def node_local(self, x, y, area, loads, order):
         if self.meridian is None:
             return super().node_local(x, y, area, loads, order)
-        k = len(self.bodies)
-        d_all = self.edge_gap(x, y, 0)[0]
-        which = np.flatnonzero(d_all < self.dhat)
-        d, dg, dh = self.edge_gap(x, y, order, which)
-        c = self.kappa * self._edge_area[which] / self.dhat
-        b, b1, b2 = barrier(d, self.dhat, order)
-        out = NodeLocal(float(c @ b) + self.body_energy(y))
+        energy, which, grad, hess = ball_edge_barrier(x, self.meridian.edges, self._centre(y), self.radius,
+                                                      self.dhat, self._edge_coef, bool(self.bodies), order)
+        out = NodeLocal(energy + self.body_energy(y), edges=which)
         out.body_gradient, out.body_hessian = self.body_energy_derivatives(y, order)
-        if order < 1:
-            return out
-        n_nodes, n_edges = x.shape[0], d_all.size
-        out.gradient = np.zeros((n_nodes, 2 + k))
-        eg = np.zeros((n_edges, 4 + k))
-        eg[which] = (c * b1)[:, None] * dg
-        out.edge_gradient = eg
+        if order >= 1:
+            out.edge_gradient = grad
         if order >= 2:
-            out.hessian = np.zeros((n_nodes, 2 + k, 2 + k))
-            eh = np.zeros((n_edges, 4 + k, 4 + k))
-            eh[which] = (c * b2)[:, None, None] * dg[:, :, None] * dg[:, None, :] + (c * b1)[:, None, None] * dh
-            out.edge_hessian = eh.transpose(1, 2, 0)
+            out.edge_hessian = hess
         return out
 
     def gaps(self, x, y):
-        return super().gaps(x, y) if self.meridian is None else self.edge_gap(x, y, 0)[0]
+        if self.meridian is None:
+            return super().gaps(x, y)
+        return ball_edge_gaps(x, self.meridian.edges, self._centre(y), self.radius)
 
     def admissible(self, x, y):
         if self.meridian is None:
             return super().admissible(x, y)
-        d = self.edge_gap(x, y, 0)[0]
+        d = self.gaps(x, y)
         if np.any(d <= 0):
             i = int(np.argmin(d))
             return f"edge {i} touches or crosses the ball (gap {d[i]:.3g} m)"
@@ -363,8 +349,8 @@ class Ball(Contact):
     def forces(self, x, y, area):
         if self.meridian is None:
             return super().forces(x, y, area)
-        d = self.edge_gap(x, y, 0)[0]
-        return np.abs(self.kappa * self._edge_area / self.dhat * barrier(d, self.dhat, 1)[1])
+        d = self.gaps(x, y)
+        return np.abs(self._edge_coef * barrier(d, self.dhat, 1)[1])
 
     def body_energy(self, y):
         return -self.mass * self.gravity * float(y[0]) if self.bodies else 0.0

@@ -155,8 +155,7 @@ class Scene:
         npos = position[2 * np.arange(n_nodes)[:, None] + np.arange(2)]          # (N, 2)
         i, j = npos[:, :, None], npos[:, None, :]
         valid = (i >= 0) & (j >= 0)
-        self._node_hess_mask = valid.ravel()
-        self._node_hess_index = np.broadcast_to(j * rows + (2 * b + i - j), valid.shape).ravel()[self._node_hess_mask]
+        self._node_hess_full = np.where(valid, j * rows + (2 * b + i - j), self._band_size)   # (N, 2, 2)
         self._node_pos = npos
         lv = m.node_lengths()
         area = 2.0 * np.pi * m.r * lv
@@ -232,11 +231,43 @@ class Scene:
         """
         loads = self.resolve_loads(loads)
         kin = self.kinematics(q)
-        energy = 0.0
-        grad_local = hess_local = None
         dens = self.density(kin, loads)
         if order >= 1 and dens is not None and self.compiled and self._compilable:
-            return self._evaluate_compiled(q, kin, dens, loads, order)
+            energy, gradient, band, floor = self._membrane_compiled(q, kin, dens, loads, order)
+        else:
+            energy, gradient, band, floor = self._membrane(q, kin, dens, loads, order)
+        x = self.node_coordinates(q)
+        for term, s in zip(self.node_terms, self._body_slices):
+            local = term.node_local(x, q[s], self.node_area, loads, order)
+            energy += local.energy
+            if order >= 1:
+                self._add_node_term(local, s, gradient, band, order)
+            if order >= 2 and self.bodies:
+                self._add_border(local, s, band)
+        if order < 1:
+            return Evaluation(energy, None, None, None)
+        stiffness = None
+        if order >= 2:
+            stiffness = BandedMatrix(band[: self._band_size].reshape(self.n_band, 3 * self.bandwidth + 1).T,
+                                     self.bandwidth)
+            if self.bodies:
+                stiffness = BodyMatrix(stiffness, band.border, band.corner)
+        return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
+
+    #: Use the compiled assembly (snapmem.kernels.edge_assembly) for the membrane where it
+    #: applies: density terms plus at most the pressure work (node terms and bodies are added
+    #: after it either way). Set False to use the numpy reference path (the tests compare the two).
+    compiled = True
+
+    @property
+    def _compilable(self) -> bool:
+        return len(self.edge_terms) <= 1 and all(type(t) is PressureWork for t in self.edge_terms)
+
+    def _membrane(self, q, kin, dens, loads, order):
+        """Energy, gradient (n_dof,), flat band (with a trash slot; None below order 2) and the
+        residual's rounding floor of the density and edge terms, by numpy."""
+        energy = 0.0
+        grad_local = hess_local = None
         if dens is not None:
             energy += float(self.weight @ dens.w)
             if order >= 1:
@@ -248,49 +279,19 @@ class Scene:
                 grad_local = g if grad_local is None else _accumulate(grad_local, g)
             if order >= 2:
                 hess_local = h if hess_local is None else _accumulate(hess_local, h)
-        nodes = [(t, t.node_local(self.node_coordinates(q), q[s], self.node_area, loads, order))
-                 for t, s in zip(self.node_terms, self._body_slices)]
-        energy += sum(local.energy for _, local in nodes)
         if order < 1:
-            return Evaluation(energy, None, None, None)
-        for _, local in nodes:                  # node terms' parts that live on edges (edge-body distance)
-            if local.edge_gradient is not None:
-                grad_local = _accumulate(grad_local, local.edge_gradient[:, :4])
-                if order >= 2:
-                    hess_local = _accumulate(hess_local, local.edge_hessian[:4, :4])
+            return energy, None, None, 0.0
+        if grad_local is None:                                  # node terms only
+            return energy, np.zeros(q.size), self._empty_band(order), 0.0
         gradient = np.bincount(self.edge_dofs.ravel(), grad_local.ravel(), minlength=q.size)
-        for (term, local), s in zip(nodes, self._body_slices):
-            gradient[: self.n_node_dofs] += local.gradient[:, :2].ravel()
-            gradient[s] += local.gradient[:, 2:].sum(axis=0)
-            if local.body_gradient is not None:
-                gradient[s] += local.body_gradient
-            if local.edge_gradient is not None:
-                gradient[s] += local.edge_gradient[:, 4:].sum(axis=0)
-        stiffness = None
+        band = None
         if order >= 2:
-            index, values = self._hess_index, hess_local.reshape(-1)
-            if nodes:
-                node_hess = sum(local.hessian[:, :2, :2] for _, local in nodes)
-                index = np.concatenate([index, self._node_hess_index])
-                values = np.concatenate([values, node_hess.reshape(-1)[self._node_hess_mask]])
-            band = np.bincount(index, values, minlength=self._band_size + 1)[: self._band_size]
-            stiffness = BandedMatrix(band.reshape(self.n_band, 3 * self.bandwidth + 1).T, self.bandwidth)
-            if self.bodies:
-                stiffness = self._bordered(stiffness, nodes)
+            band = _Band(np.bincount(self._hess_index, hess_local.reshape(-1), minlength=self._band_size + 1))
         floor = 64.0 * np.finfo(float).eps * self.meridian.nodes * float(np.max(np.abs(grad_local)))
-        return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
+        return energy, gradient, band, floor
 
-    #: Use the compiled assembly (snapmem.kernels.edge_assembly) where it applies: density terms
-    #: plus at most the pressure work, no node terms and no bodies. Set False to use the numpy
-    #: reference path (the tests compare the two).
-    compiled = True
-
-    @property
-    def _compilable(self) -> bool:
-        return (not self.node_terms and not self.bodies and len(self.edge_terms) <= 1
-                and all(type(t) is PressureWork for t in self.edge_terms))
-
-    def _evaluate_compiled(self, q, kin, dens, loads, order) -> Evaluation:
+    def _membrane_compiled(self, q, kin, dens, loads, order):
+        """As :meth:`_membrane`, by the compiled kernel (snapmem.kernels.edge_assembly)."""
         from .kernels import edge_assembly                 # numba: compiled on first use, cached on disk
         pressure = loads["pressure"] if self.edge_terms else 0.0
         m = self.meridian
@@ -298,38 +299,65 @@ class Scene:
             q, m.edges, kin.inv_length, kin.inv_mid_radius, self.weight, dens.w1, dens.w2, dens.w11, dens.w12,
             dens.w22, pressure, self._hess_index, self._band_size, order)
         energy = float(self.weight @ dens.w) - pressure * volume
-        stiffness = None
-        if order >= 2:
-            stiffness = BandedMatrix(band[: self._band_size].reshape(self.n_band, 3 * self.bandwidth + 1).T,
-                                     self.bandwidth)
-        floor = 64.0 * np.finfo(float).eps * m.nodes * force
-        return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
+        if gradient.size < q.size:                         # the bodies' heights, after the nodes
+            gradient = np.concatenate([gradient, np.zeros(q.size - gradient.size)])
+        return energy, gradient, (_Band(band) if order >= 2 else None), 64.0 * np.finfo(float).eps * m.nodes * force
 
-    def _bordered(self, band: BandedMatrix, nodes) -> BodyMatrix:
-        """The band bordered by the rigid bodies' rows and columns (node-body and body-body blocks)."""
+    def _empty_band(self, order):
+        return _Band(np.zeros(self._band_size + 1)) if order >= 2 else None
+
+    def _add_node_term(self, local, s, gradient, band, order) -> None:
+        """Add a node term's gradient and Hessian (node blocks, edge blocks, body parts) in place."""
+        nodes = slice(None) if local.nodes is None else local.nodes
+        if local.gradient is not None:
+            g = gradient[: self.n_node_dofs].reshape(-1, 2)
+            g[nodes] += local.gradient[:, :2]
+            gradient[s] += local.gradient[:, 2:].sum(axis=0)
+        if local.body_gradient is not None:
+            gradient[s] += local.body_gradient
+        if local.edge_gradient is not None:
+            edges = slice(None) if local.edges is None else local.edges
+            eg = local.edge_gradient
+            gradient += np.bincount(self.edge_dofs[edges].ravel(), eg[:, :4].ravel(), minlength=gradient.size)
+            gradient[s] += eg[:, 4:].sum(axis=0)
+        if order < 2:
+            return
+        if local.hessian is not None:
+            index = self._node_hess_full[nodes].ravel()
+            band.values += np.bincount(index, local.hessian[:, :2, :2].ravel(), minlength=band.values.size)
+        if local.edge_hessian is not None:
+            edges = slice(None) if local.edges is None else local.edges
+            index = self._hess_index.reshape(16, -1)[:, edges].ravel()
+            band.values += np.bincount(index, local.edge_hessian[:4, :4].ravel(), minlength=band.values.size)
+
+    def _add_border(self, local, s, band) -> None:
+        """Add a node term's node-body and body-body blocks to the border and corner of ``band``."""
         k = len(self.bodies)
-        border = np.zeros((self.n_band, k))
-        corner = np.zeros((k, k))
-        pos = self._node_pos.ravel()
-        keep = pos >= 0
-        for (term, local), s in zip(nodes, self._body_slices):
-            cols = np.arange(s.start, s.stop) - self.n_node_dofs
+        if band.border is None:
+            band.border, band.corner = np.zeros((self.n_band, k)), np.zeros((k, k))
+        cols = np.arange(s.start, s.stop) - self.n_node_dofs
+        if cols.size == 0:
+            return
+        border, corner = band.border, band.corner
+        block = np.ix_(cols, cols)
+        if local.hessian is not None:
+            nodes = slice(None) if local.nodes is None else local.nodes
+            pos = self._node_pos[nodes].ravel()
+            keep = pos >= 0
             h = local.hessian
             for a, col in enumerate(cols):
-                coupling = h[:, :2, 2 + a].ravel()
-                border[:, col] += np.bincount(pos[keep], coupling[keep], minlength=self.n_band)
-            corner[np.ix_(cols, cols)] += h[:, 2:, 2:].sum(axis=0)
-            if local.body_hessian is not None:
-                corner[np.ix_(cols, cols)] += local.body_hessian
-            if local.edge_hessian is not None:
-                he = local.edge_hessian                                # (4 + k, 4 + k, E)
-                epos = self._edge_pos.T.ravel()                        # entry-major (4, E)
-                ekeep = epos >= 0
-                for a, col in enumerate(cols):
-                    coupling = he[:4, 4 + a].ravel()
-                    border[:, col] += np.bincount(epos[ekeep], coupling[ekeep], minlength=self.n_band)
-                corner[np.ix_(cols, cols)] += he[4:, 4:].sum(axis=-1)
-        return BodyMatrix(band, border, corner)
+                border[:, col] += np.bincount(pos[keep], h[:, :2, 2 + a].ravel()[keep], minlength=self.n_band)
+            corner[block] += h[:, 2:, 2:].sum(axis=0)
+        if local.body_hessian is not None:
+            corner[block] += local.body_hessian
+        if local.edge_hessian is not None:
+            edges = slice(None) if local.edges is None else local.edges
+            he = local.edge_hessian                                # (4 + k, 4 + k, M)
+            epos = self._edge_pos[edges].T.ravel()                 # entry-major (4, M)
+            keep = epos >= 0
+            for a, col in enumerate(cols):
+                border[:, col] += np.bincount(epos[keep], he[:4, 4 + a].ravel()[keep], minlength=self.n_band)
+            corner[block] += he[4:, 4:].sum(axis=-1)
 
     def energy(self, q, loads=None) -> float:
         return self.evaluate(q, loads, order=0).energy
@@ -455,6 +483,19 @@ class Scene:
     def __repr__(self):
         return (f"Scene({self.name!r}, nodes={self.meridian.nodes}, terms={[type(t).__name__ for t in self.terms]}, "
                 f"fixed={list(self.fixed)}, loads={self.loads})")
+
+
+class _Band:
+    """The stiffness being assembled: flat band values (ab.T in C order, one trailing trash slot
+    for fixed degrees of freedom) and, with rigid bodies, the border and corner blocks."""
+
+    __slots__ = ("values", "border", "corner")
+
+    def __init__(self, values: np.ndarray):
+        self.values, self.border, self.corner = values, None, None
+
+    def __getitem__(self, key):
+        return self.values[key]
 
 
 def _accumulate(total: np.ndarray, part: np.ndarray) -> np.ndarray:

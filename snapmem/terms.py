@@ -186,22 +186,29 @@ class NodeLocal:
     ----------
     energy : float
         [J]
-    gradient : ndarray (N, 2 + k) or None
+    nodes : ndarray (M,) of int or None
+        The nodes ``gradient`` and ``hessian`` rows belong to (None: all N, in order); a
+        barrier lists only the nodes within its width.
+    gradient : ndarray (M, 2 + k) or None
         d(energy)/d(r_i, z_i, y_1..y_k) of each node's share [N].
-    hessian : ndarray (N, 2 + k, 2 + k) or None
+    hessian : ndarray (M, 2 + k, 2 + k) or None
         Second derivatives of each node's share [N/m].
     body_gradient, body_hessian : ndarray (k,), (k, k) or None
         Parts that depend on the body coordinates y alone (a body's weight).
-    edge_gradient, edge_hessian : ndarray (E, 4 + k), (4 + k, 4 + k, E) or None
+    edges : ndarray (M_e,) of int or None
+        The edges ``edge_gradient`` and ``edge_hessian`` belong to (None: all E, in order).
+    edge_gradient, edge_hessian : ndarray (M_e, 4 + k), (4 + k, 4 + k, M_e) or None
         Parts summed over edges instead (an edge's distance to a body), in each edge's local
         coordinates (r_a, z_a, r_b, z_b) followed by y; the Hessian entry-major like edge terms'.
     """
 
     energy: float
+    nodes: np.ndarray | None = None
     gradient: np.ndarray | None = None
     hessian: np.ndarray | None = None
     body_gradient: np.ndarray | None = None
     body_hessian: np.ndarray | None = None
+    edges: np.ndarray | None = None
     edge_gradient: np.ndarray | None = None
     edge_hessian: np.ndarray | None = None
 

@@ -196,3 +196,34 @@ def test_a_long_edge_cannot_pass_through_the_ball():
     x[4] = (0.3, 5.0)                             # edge 3-4 runs along the axis through the ball
     assert ball_nodes.admissible(x, np.array([])) is None
     assert "edge 3" in ball_edges.admissible(x, np.array([]))
+
+
+@pytest.mark.parametrize("mass", [None, 0.5])
+def test_compiled_ball_edge_barrier_matches_the_numpy_edge_gaps(mass):
+    """snapmem.contact_kernels.ball_edge_barrier against Ball.edge_gap (numpy) and barrier(), on a
+    dimpled cap where the centre projects inside edges (line case) and onto nodes (end case)."""
+    from scipy.optimize import brentq
+
+    from snapmem.contact_kernels import ball_edge_barrier, ball_edge_gaps
+    m = sphere(0.1, 41)
+    x = m.q.reshape(-1, 2).copy()
+    x[:, 1] -= 0.02 * np.exp(-(x[:, 0] / 0.06) ** 2)            # a dimple under the ball
+    for dhat in (1e-3, 1e-2, 3e-2):                              # the nearest edge 0.3 dhat away
+        zc = brentq(lambda z: ball_edge_gaps(x, m.edges, z, 0.05).min() - 0.3 * dhat, 0.1, 0.3, xtol=1e-14)
+        ball = Ball(kappa=1e4, dhat=dhat, radius=0.05, z0=zc, mass=mass, gravity=-10.0, meridian=m)
+        y = np.array([zc])
+        d, g, h = ball.edge_gap(x, y, 2)
+        np.testing.assert_allclose(ball_edge_gaps(x, m.edges, zc, 0.05), d, rtol=0, atol=1e-15)
+        coef = ball.kappa * ball._edge_area / dhat
+        energy, which, grad, hess = ball_edge_barrier(x, m.edges, zc, 0.05, dhat, coef, mass is not None, 2)
+        np.testing.assert_array_equal(which, np.flatnonzero(d < dhat))
+        a, b = x[m.edges[which, 0]], x[m.edges[which, 1]]
+        t = np.einsum("ij,ij->i", np.stack([-a[:, 0], zc - a[:, 1]], 1), b - a) / np.einsum("ij,ij->i", b - a, b - a)
+        assert np.any((t > 0) & (t < 1)) and np.any(t >= 1)          # both the line and the end case
+        c = coef[which]
+        b0, b1, b2 = barrier(d[which], dhat)
+        assert energy == pytest.approx(float(c @ b0), rel=1e-13)
+        np.testing.assert_allclose(grad, (c * b1)[:, None] * g[which], rtol=1e-12, atol=1e-12 * np.abs(grad).max())
+        ref = ((c * b2)[:, None, None] * g[which][:, :, None] * g[which][:, None, :]
+               + (c * b1)[:, None, None] * h[which]).transpose(1, 2, 0)
+        np.testing.assert_allclose(hess, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
