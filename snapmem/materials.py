@@ -63,6 +63,13 @@ class Law:
         return (lam1 > 0) & (lam2 > 0)
 
 
+def _full(x, like: np.ndarray) -> np.ndarray:
+    """x as a float array of the shape of ``like`` (a law's constant derivative is a scalar)."""
+    if type(x) is np.ndarray and x.shape == like.shape and x.dtype == np.float64:
+        return x
+    return np.broadcast_to(np.asarray(x, dtype=float), like.shape)
+
+
 class InvariantLaw(Law):
     """A law W(I1, I2) of the first two invariants of the (incompressible) right Cauchy-Green tensor.
 
@@ -86,6 +93,11 @@ class InvariantLaw(Law):
         inv = 1.0 / (a2 * b2)                      # lam3^2
         I1 = a2 + b2 + inv
         I2 = 1.0 / a2 + 1.0 / b2 + a2 * b2
+        W, W1, W2, W11, W12, W22 = self.invariant_derivatives(I1, I2)
+        if compiled_chain and _compilable(lam1, lam2):
+            from .kernels import invariant_chain          # the chain rule below, in one pass
+            w1, w2, w11, w12, w22 = invariant_chain(lam1, lam2, *(_full(x, lam1) for x in (W1, W2, W11, W12, W22)))
+            return Density(W, w1, w2, w11, w12, w22)
         # first and second derivatives of the invariants in (lam1, lam2)
         i1_1 = 2.0 * lam1 - 2.0 * inv / lam1
         i1_2 = 2.0 * lam2 - 2.0 * inv / lam2
@@ -97,13 +109,6 @@ class InvariantLaw(Law):
         i2_11 = 6.0 / (a2 * a2) + 2.0 * b2
         i2_12 = 4.0 * lam1 * lam2
         i2_22 = 6.0 / (b2 * b2) + 2.0 * a2
-        W, W1, W2, W11, W12, W22 = self.invariant_derivatives(I1, I2)
-        if compiled_chain and _compilable(lam1, lam2):
-            from .kernels import invariant_chain          # the same chain rule, one pass
-            shape = lam1.shape
-            w1, w2, w11, w12, w22 = invariant_chain(
-                lam1, lam2, *(np.broadcast_to(np.asarray(x, dtype=float), shape) for x in (W1, W2, W11, W12, W22)))
-            return Density(W, w1, w2, w11, w12, w22)
         if self.linear:
             return Density(w=W, w1=W1 * i1_1 + W2 * i2_1, w2=W1 * i1_2 + W2 * i2_2,
                            w11=W1 * i1_11 + W2 * i2_11, w12=W1 * i1_12 + W2 * i2_12, w22=W1 * i1_22 + W2 * i2_22)
