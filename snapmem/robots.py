@@ -348,15 +348,30 @@ ROBOTIC_SCENES = ("pump", "gripper_rod", "gripper_shell", "ball_drop", "ball_thr
 def events(traj: Trajectory) -> dict:
     """The events of a robotic run that its accuracy is judged by, by scene.
 
-    ``snap`` (time of the fastest volume change [s]) for every scene; the pump adds ``snap_back``
-    (fastest fall after the voltage is off); ball scenes add ``ball_top`` (highest ball height after
-    the start [m]) and ``ball_final`` [m]; torus_snap adds ``outer_radius`` (final).
+    * pump: ``snap`` (time of the fastest volume growth before t_down [s]) and ``snap_back``
+      (fastest fall after it).
+    * grippers and torus_snap: ``snap`` (time of the fastest volume change); torus_snap adds
+      ``outer_radius`` (final) [m].
+    * ball_drop: ``impact`` (the ball's gap first falls below the barrier width), ``bounce``
+      (its first lowest point) and ``rebound`` (the highest point after that) [s], and
+      ``rebound_height``, the ball centre's height above the plate there [m].
+    * ball_throw: ``snap``, when the volume first reaches the geometric mean of its start and its
+      largest value (inside the jump of a snap of any size; the fastest volume change is a peak
+      of the membrane's ringing after the snap, which the time step does not decide), ``launch``
+      (the ball's gap last rises above the barrier width) [s], and ``ball_apex``, the highest
+      point of the ball's free flight above the plate [m] (z + v^2 / 2|g| once it flies: the ball
+      is undamped, so that is exact even where the run ends before the apex).
+
+    Times and heights between frames are interpolated (linearly for crossings, by a parabola
+    through three frames for extrema), so they resolve well below the frame interval.
     """
     t, volume = traj["t"], traj["volume"]
+    name = traj.meta.get("scene", "")
+    if name in ("ball_drop", "ball_throw"):
+        return _ball_events(traj, name)
     rate = np.diff(volume) / np.maximum(np.diff(t), 1e-300)
     mid = 0.5 * (t[:-1] + t[1:])
     out = {}
-    name = traj.meta.get("scene", "")
     if name == "pump":
         t_down = traj.meta["parameters"]["t_down"]
         up = mid < t_down
@@ -364,9 +379,60 @@ def events(traj: Trajectory) -> dict:
         out["snap_back"] = float(mid[~up][np.argmin(rate[~up])]) if np.any(~up) else float("nan")
     else:
         out["snap"] = float(mid[np.argmax(np.abs(rate))])
-    if "ball_z" in traj.data:
-        out["ball_top"] = float(traj["ball_z"][1:].max())
-        out["ball_final"] = float(traj["ball_z"][-1])
     if name == "torus_snap":
         out["outer_radius"] = float(traj["r"][-1].max())
     return out
+
+
+def _ball_events(traj: Trajectory, name: str) -> dict:
+    p = traj.meta["parameters"]
+    t, z, gap = traj["t"], traj["ball_z"] + p["R"], traj["ball_gap"]         # heights above the plate
+    nan = float("nan")
+    if name == "ball_drop":
+        impact = _crossing(t, gap, p["dhat"], falling=True)
+        out = {"impact": impact, "bounce": nan, "rebound": nan, "rebound_height": nan}
+        low = _extremum(t, z, t >= impact, lowest=True)
+        if low is not None:
+            out["bounce"] = low[0]
+            high = _extremum(t, z, t > low[0], lowest=False)
+            if high is not None:
+                out["rebound"], out["rebound_height"] = high
+        return out
+    volume = traj["volume"]
+    snap = _crossing(t, volume, float(np.sqrt(volume[0] * volume.max())), falling=False)
+    touching = gap < p["dhat"]
+    out = {"snap": snap, "launch": nan, "ball_apex": float(z.max())}
+    if touching.any() and not touching[-1]:
+        last = int(np.flatnonzero(touching)[-1])
+        out["launch"] = _crossing(t[last:], gap[last:], p["dhat"], falling=False)
+        v = traj["ball_v"][-1]
+        out["ball_apex"] = max(out["ball_apex"], float(z[-1] + max(v, 0.0) ** 2 / (2.0 * abs(p["g"]))))
+    return out
+
+
+def _crossing(t, y, level, falling: bool) -> float:
+    """First time y crosses ``level`` (downwards if ``falling``), linear between frames; nan if never."""
+    above = y > level
+    idx = np.flatnonzero(above[:-1] & ~above[1:]) if falling else np.flatnonzero(~above[:-1] & above[1:])
+    if idx.size == 0:
+        return float("nan")
+    i = int(idx[0])
+    return float(t[i] + (level - y[i]) * (t[i + 1] - t[i]) / (y[i + 1] - y[i]))
+
+
+def _extremum(t, y, where, lowest: bool):
+    """(time, value) of the first local minimum (or maximum) of y among frames ``where``, refined by
+    the parabola through it and its neighbours; None if there is none."""
+    s = -1.0 if lowest else 1.0
+    idx = np.flatnonzero(where[1:-1] & (s * y[1:-1] >= s * y[:-2]) & (s * y[1:-1] > s * y[2:])) + 1
+    if idx.size == 0:
+        return None
+    i = int(idx[0])
+    (t0, t1, t2), (y0, y1, y2) = t[i - 1:i + 2], y[i - 1:i + 2]
+    d01, d12 = (y1 - y0) / (t1 - t0), (y2 - y1) / (t2 - t1)
+    c = (d12 - d01) / (t2 - t0)                                     # y = y1 + b (t - t1) + c (t - t1)^2
+    b = d01 + c * (t1 - t0)
+    if c == 0:
+        return float(t1), float(y1)
+    tm = t1 - b / (2 * c)
+    return float(tm), float(y1 - b * b / (4 * c))

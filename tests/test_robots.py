@@ -7,7 +7,7 @@ import pytest
 from snapmem import build_scene
 from snapmem.cli import main
 from snapmem.dynamics import Trajectory, simulate
-from snapmem.robots import ROBOTIC_SCENES, experiment, resting, run
+from snapmem.robots import ROBOTIC_SCENES, events, experiment, resting, run
 from snapmem.scenes import SCENES
 
 
@@ -104,3 +104,27 @@ def test_robot_curves_quick_pump_limit_points(tmp_path):
     limits = _study("robot_curves").main(["--quick", "--only", "pump", "--out", str(tmp_path)])["pump"]
     first = limits[limits["kind"] == "LP"].groupby("phi")["pressure"].first()
     assert 70 < first[300.0] < first[0.0] < 95
+
+
+def test_event_interpolation_is_exact_for_lines_and_parabolas():
+    from snapmem.robots import _crossing, _extremum
+    t = np.linspace(0.0, 1.0, 11)
+    line = 2.0 - 3.0 * t
+    assert _crossing(t, line, 0.65, falling=True) == pytest.approx(0.45, abs=1e-14)
+    assert np.isnan(_crossing(t, line, 0.65, falling=False))
+    parabola = 1.0 + 3.0 * (t - 0.437) ** 2
+    tm, ym = _extremum(t, parabola, np.ones(t.size, bool), lowest=True)
+    assert tm == pytest.approx(0.437, abs=1e-12) and ym == pytest.approx(1.0, abs=1e-12)
+    assert _extremum(t, parabola, t > 0.6, lowest=True) is None
+
+
+def test_ball_drop_events_are_ordered_and_physical():
+    """Impact about when free fall from ``drop`` closes the gap, then the lowest point, then the rebound."""
+    traj = run("ball_drop", nodes=21, t_end=0.8)
+    ev = events(traj)
+    drop, dhat, g = 0.05, traj.meta["parameters"]["dhat"], 10.0
+    free_fall = np.sqrt(2 * (drop - dhat) / g)                    # undamped; xi = 1 slows it slightly
+    assert free_fall < ev["impact"] < 1.05 * free_fall
+    assert ev["impact"] < ev["bounce"] < ev["rebound"] < 0.8
+    start = traj["ball_z"][0] + traj.meta["parameters"]["R"]
+    assert 0 < ev["rebound_height"] < start                       # damping: lower than it fell from
