@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact_kernels import ball_edge_barrier, ball_edge_gaps, ball_min_gap
+from .contact_kernels import ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step
 from .errors import check_real
 from .terms import NodeLocal, NodeTerm, RigidBody
 
@@ -36,6 +36,11 @@ def barrier(d: np.ndarray, dhat: float, order: int = 2):
     Returns (b, b', b'') with entries None above ``order``; each of the shape of ``d`` [m^2, m, 1].
     """
     d = np.asarray(d, dtype=float)
+    if d.size and 0.0 < d.min() and d.max() < dhat:     # all active and admissible: the formulas alone
+        log = np.log(d / dhat)
+        e = d - dhat
+        return (-e * e * log, (-2.0 * e * log - e * e / d) if order >= 1 else None,
+                (-2.0 * log + (dhat - d) * (3.0 * d + dhat) / (d * d)) if order >= 2 else None)
     active = d < dhat
     dd = np.where(active, d, dhat)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -69,6 +74,7 @@ class Contact(NodeTerm):
         check_real("kappa", self.kappa, minimum=0.0, min_inclusive=False)
         check_real("dhat", self.dhat, minimum=0.0, min_inclusive=False)
         object.__setattr__(self, "_index", None if self.nodes is None else np.asarray(self.nodes, dtype=int))
+        object.__setattr__(self, "_all", None)         # arange(N), made on first use
 
     # a subclass gives the gap of nodes x (M, 2) from the body at heights y (k,):
     # d (M,), its gradient (M, 2 + k) and Hessian (M, 2 + k, 2 + k) (None for a linear gap)
@@ -83,14 +89,23 @@ class Contact(NodeTerm):
         return self.gap(self._selected(x), y, 0)[0]
 
     def node_local(self, x, y, area, loads, order):
-        idx = np.arange(x.shape[0]) if self._index is None else self._index
+        idx = self._index
+        if idx is None:
+            if self._all is None or self._all.size != x.shape[0]:
+                object.__setattr__(self, "_all", np.arange(x.shape[0]))
+            idx = self._all
         d = self.gap(x[idx], y, 0)[0]
-        idx = idx[d < self.dhat]                   # only nodes within the barrier width feel it
+        near = d < self.dhat                       # only nodes within the barrier width feel it
+        idx = idx[near]
+        out = NodeLocal(self.body_energy(y), nodes=idx)
+        out.body_gradient, out.body_hessian = self.body_energy_derivatives(y, order)
+        if idx.size == 0:
+            out.nodes = None                       # nothing near: no node parts at all
+            return out
         d, dg, dh = self.gap(x[idx], y, order)
         c = self.kappa * area[idx] / self.dhat
         b, b1, b2 = barrier(d, self.dhat, order)
-        out = NodeLocal(float(c @ b) + self.body_energy(y), nodes=idx)
-        out.body_gradient, out.body_hessian = self.body_energy_derivatives(y, order)
+        out.energy += float(c @ b)
         if order < 1:
             return out
         out.gradient = (c * b1)[:, None] * dg
@@ -295,17 +310,7 @@ class Ball(Contact):
     def _node_max_step(self, x, y, dx, dy):
         xs, dxs = self._selected(x), self._selected(dx)
         dzb = float(dy[0]) if self.bodies else 0.0
-        pr, pz = xs[:, 0], xs[:, 1] - self._centre(y)
-        qr, qz = dxs[:, 0], dxs[:, 1] - dzb
-        a = qr * qr + qz * qz
-        b = pr * qr + pz * qz
-        c = pr * pr + pz * pz - self.radius ** 2
-        disc = b * b - a * c
-        hit = (a > 0) & (b < 0) & (disc >= 0)
-        if not np.any(hit):
-            return 1.0
-        root = (-b[hit] - np.sqrt(disc[hit])) / a[hit]          # first crossing (c > 0)
-        return float(min(1.0, FRACTION_TO_BOUNDARY * np.min(root)))
+        return float(ball_node_max_step(xs, dxs, self._centre(y), dzb, self.radius, FRACTION_TO_BOUNDARY))
 
     def _edges_clear(self, x, y, dx, dy, alpha):
         """Largest alpha' <= alpha (halving) at which no edge reaches the ball, keeping 10% of each gap."""

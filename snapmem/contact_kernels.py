@@ -177,3 +177,20 @@ def ball_edge_barrier(x, edges, zc, radius, dhat, coef, body, order):
                     for bb in range(n):
                         hess[a, bb, k] = b2 * g[a] * g[bb] + b1 * h[a, bb]
     return energy, which, grad, hess
+
+
+@njit(cache=True, nogil=True)
+def ball_node_max_step(x, dx, zc, dzc, radius, fraction):
+    """Largest alpha <= 1 before any node reaches the ball along (dx, dzc), times ``fraction``:
+    the first root of |p + alpha dp| = radius (p relative to the centre), over the nodes that close in."""
+    alpha = 1.0
+    for i in range(x.shape[0]):
+        pr, pz = x[i, 0], x[i, 1] - zc
+        qr, qz = dx[i, 0], dx[i, 1] - dzc
+        a = qr * qr + qz * qz
+        b = pr * qr + pz * qz
+        c = pr * pr + pz * pz - radius * radius
+        disc = b * b - a * c
+        if a > 0.0 and b < 0.0 and disc >= 0.0:
+            alpha = min(alpha, fraction * (-b - np.sqrt(disc)) / a)
+    return alpha

@@ -305,7 +305,7 @@ def _ball_parameters(name, t_end, drop, damp_ball):
                Parameter("damp_ball", damp_ball, "", "1: damping xi acts on the ball too; 0: it flies freely", int,
                          minimum=0, maximum=1),
                Parameter("rate", 100.0, "Pa/s", "pressure rate (ball_throw)"))
-            + _dynamics_parameters(1000.0, 1.0, t_end))
+            + _dynamics_parameters(1000.0, 1.0, t_end, tol=4e-3))
 
 
 register(SceneSpec("ball_drop", "ball dropped on a balloon held at 500 Pa on a plate (paper Fig. 8, case 1)",
