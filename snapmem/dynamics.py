@@ -157,7 +157,11 @@ class DynamicsOptions:
     dt_min, dt_max : float
         Step bounds [s] (defaults 1e-9 and 1.0).
     newton : NewtonOptions
-        Tolerances of each step's Newton solve (residual relative to mu H L).
+        Tolerances of each step's Newton solve (residual relative to mu H L). At most 10 step
+        halvings per iteration (statics allow 30): a time step whose Newton needs more is cut
+        instead, which is cheaper. Measured on the pump (30 s): the failing solves at a slack
+        cap's rounding floor spent 1107 of 1178 halvings; with 10, the CPU time fell 0.51 ->
+        0.29 s with the same steps and snap times (gripper_rod 0.37 -> 0.19 s).
     save_interval : float
         Record a frame at most this often [s] (default 0: every accepted step); the last
         step is always recorded, and ``min_gap`` holds the smallest gap since the previous frame.
@@ -176,7 +180,7 @@ class DynamicsOptions:
     tol: float = 1e-4
     dt_min: float = 1e-9
     dt_max: float = 1.0
-    newton: NewtonOptions = NewtonOptions(tol=1e-9, max_iterations=25)
+    newton: NewtonOptions = NewtonOptions(tol=1e-9, max_iterations=25, max_cuts=10)
     save_interval: float = 0.0
     max_steps: int = 1_000_000
     line_search: str = "energy"
