@@ -29,6 +29,7 @@ STUDIES = [
     ("fig9_timing", ["--out", "results"]),
     ("error_vs_runtime", ["--out", "results"]),
     ("stress_cases", ["--out", "results"]),
+    ("contact_barrier", ["--out", "results"]),
 ]
 
 

@@ -94,3 +94,15 @@ def test_fig6_8_robots(tmp_path):
     cycle = module.main(["--quick", "--out", str(tmp_path), "--tables", str(robots)])
     assert cycle["volume"].max() > 100 * cycle["volume"].iloc[0]          # the pump snapped through
     assert (tmp_path / "fig7_gripper_rod_force.png").stat().st_size > 1000
+
+
+def test_contact_barrier(tmp_path):
+    """A wider barrier holds the ball higher: its gap at rest is about 0.75 dhat, so the rest height
+    rises by at least about that much of the 2 mm of width added (measured: 3.6 mm, the rest from
+    a contact spread over more edges indenting the balloon less)."""
+    t = run("contact_barrier", tmp_path)("contact_barrier").set_index("dhat")
+    rise = t.loc[3e-3, "rest_height"] - t.loc[1e-3, "rest_height"]
+    assert 0.7 * 2e-3 < rise < 3.0 * 2e-3
+    assert (t["drop_min_gap"] > 0).all() and (t["gripper_min_gap"] > 0).all()
+    assert t["drop_impact"].lt(t["drop_bounce"]).all() and t["drop_bounce"].lt(t["drop_rebound"]).all()
+    assert t.loc[1e-3, "rest_height_rel"] == 0.0                 # the finest barrier of the quick grid
