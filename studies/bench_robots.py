@@ -1,8 +1,9 @@
 """Benchmark: real-time factor of every robotic scene and of torus_snap at converged accuracy.
 
 Each scene runs at its default tolerance and at 4x tighter; the run counts as converged when its
-events (snap times, ball heights, torus radius: snapmem.robots.events) agree with the tighter run
-within 1%. Real-time factor = simulated time / wall time (median of --repeats runs); also on the
+events (snap times, ball impact/bounce/rebound and launch/apex, torus radius:
+snapmem.robots.events) agree with the tighter run within 1%. torus_snap's final outer radius is
+also compared with a mesh-converged one (2x and 4x the nodes, Richardson). Real-time factor = simulated time / wall time (median of --repeats runs); also on the
 process's CPU time, which a busy shared machine disturbs less.
 
     python studies/bench_robots.py [--quick] [--repeats 3] [--out results/bench_robots.csv]
@@ -33,6 +34,16 @@ def timed(name, tol_factor, t_end, params, tol=None):
     return time.perf_counter() - t0, time.process_time() - c0, traj, options.tol
 
 
+def mesh_convergence(name, ev):
+    """torus_snap's final outer radius against a mesh-converged one: runs at 2x and 4x the nodes,
+    Richardson-extrapolated at order 2 (the measured N : 2N : 4N differences fall by 4.0)."""
+    nodes = experiment(name).scene.meridian.nodes
+    radii = [events(timed(name, 1.0, None, {"nodes": k * nodes})[2])["outer_radius"] for k in (2, 4)]
+    limit = radii[1] + (radii[1] - radii[0]) / 3.0
+    return {"outer_radius_2N": radii[0], "outer_radius_4N": radii[1], "outer_radius_extrapolated": limit,
+            "outer_radius_rel_error": abs(ev["outer_radius"] - limit) / limit}
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="21 nodes, short runs, one repeat")
@@ -52,13 +63,17 @@ def main(argv=None):
         worst = max(abs(ev[k] - ev_tight[k]) / max(abs(ev_tight[k]), 1e-12) for k in ev)
         meta = traj[-1].meta
         wall, cpu = float(np.median(walls)), float(np.median(cpus))
+        mesh = mesh_convergence(name, ev) if name == "torus_snap" and not args.quick else {}
         rows.append({"scene": name, "nodes": meta["nodes"], "scheme": meta["scheme"], "tol": tol[-1],
                      "status": meta["status"], "t_end": meta["t_end"], "wall_s": wall,
                      "real_time_factor": meta["t_end"] / wall, "cpu_s": cpu,
                      "real_time_factor_cpu": meta["t_end"] / cpu, "steps": meta["steps"], "rejected": meta["rejected"],
                      "newton_iterations": meta["newton_iterations"], "min_gap": float(np.min(traj[-1]["min_gap"])),
                      "events_rel_diff_4x_tighter": worst, "converged_1pct": bool(worst < 0.01),
-                     **{f"event_{k}": v for k, v in ev.items()}})
+                     **{f"event_{k}": v for k, v in ev.items()}, **mesh})
+        if mesh:
+            print(f"{name}: final outer radius {ev['outer_radius']:.5g}, {mesh['outer_radius_rel_error']:.3%} from the "
+                  f"mesh-converged {mesh['outer_radius_extrapolated']:.5g}", flush=True)
         print(f"{name}: {rows[-1]['real_time_factor']:.3g}x real time ({meta['t_end'] / cpu:.3g}x on CPU time), {wall:.3g} s, "
               f"{meta['newton_iterations']} Newton iterations, events within {worst:.2%} of 4x tighter", flush=True)
     table = pd.DataFrame(rows)
