@@ -3,7 +3,10 @@
 A matrix K of order n and half-bandwidth b is stored as ``ab`` of shape (3b + 1, n) with
 K[i, j] = ab[2b + i - j, j]; the first b rows are the workspace LAPACK's ``gbtrf`` needs for
 partial pivoting, so assembly writes straight into the array that is factorised (no copy into
-another layout). Partial pivoting handles the indefinite K of unstable branches; Cholesky would not.
+another layout). Solves factorise K as L D L^T without pivoting (a compiled kernel reading the
+lower band, with a quarter of the storage of the LU) wherever that is stable: its element growth
+is measured and, if large (a small pivot inside an indefinite K, which Cholesky could not factor
+at all) or a pivot is zero, LAPACK's band LU with partial pivoting is used instead.
 """
 
 from __future__ import annotations
@@ -11,6 +14,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import eig_banded
 from scipy.linalg.lapack import dgbtrf, dgbtrs
+
+#: Largest element growth of the LDL^T factors (``snapmem.kernels.band_ldlt``: 1 for a positive
+#: definite K) at which they are used for solves; beyond it the pivoted band LU is. At 1e3 the
+#: solve's backward error is at most about 1e3 eps |K|, no worse than LU's own bound for b = 5.
+LDLT_GROWTH_LIMIT = 1e3
 
 
 class BandedMatrix:
@@ -54,23 +62,29 @@ class BandedMatrix:
         return K
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
-        """K @ x for x of shape (n,) or (n, m)."""
-        n, b = self.n, self.b
-        ab = self.ab if x.ndim == 1 else self.ab[:, :, None]
-        y = ab[2 * b] * x
-        for d in range(1, b + 1):
-            y[d:] += ab[2 * b + d, : n - d] * x[: n - d]      # below the diagonal
-            y[: n - d] += ab[2 * b - d, d:] * x[d:]           # above
-        return y
+        """K @ x for x of shape (n,) or (n, m) (from the lower band: K is symmetric)."""
+        from .kernels import band_matvec
+        x = np.asarray(x, dtype=float)
+        return band_matvec(self.lower(), np.ascontiguousarray(x.reshape(x.shape[0], -1))).reshape(x.shape)
 
     def lower(self) -> np.ndarray:
         """Lower symmetric band form (b + 1, n) as ``scipy.linalg.eig_banded`` takes it."""
         return self.ab[2 * self.b:]
 
-    def lu(self) -> "BandedLU":
+    def lu(self):
+        """A factorisation for solves, with the inertia: :class:`BandedLDLT` where it is stable
+        (no zero pivot, growth at most :data:`LDLT_GROWTH_LIMIT`), else :meth:`pivoted_lu`."""
+        from .kernels import band_ldlt                  # numba: compiled (or loaded) on first use
+        F, negative, zero, growth = band_ldlt(self.lower(), self.b)
+        if zero == 0 and growth <= LDLT_GROWTH_LIMIT:
+            return BandedLDLT(F, negative)
+        return self.pivoted_lu(negative)
+
+    def pivoted_lu(self, negative: int | None = None) -> "BandedLU":
         """LU factorisation with partial pivoting (LAPACK dgbtrf) of a copy of this matrix."""
         lu, piv, info = dgbtrf(self.ab, self.b, self.b)
-        return BandedLU(lu, piv, self.b, singular=info > 0)
+        return BandedLU(lu, piv, self.b, singular=info > 0,
+                        negative=self.negative_count() if negative is None else negative)
 
     def smallest_eigenvalues(self, k: int) -> np.ndarray:
         """The k smallest eigenvalues, ascending, exactly (LAPACK band reduction: O(n^2 b) work,
@@ -91,16 +105,33 @@ class BandedMatrix:
         """Number of negative eigenvalues (the inertia index), from the pivot signs of a band
         LDL^T factorisation (Sylvester): O(n b^2). ``known`` is accepted for compatibility and ignored.
         """
-        from .kernels import band_ldlt_inertia         # numba: compiled (or loaded) on first use
-        negative, _ = band_ldlt_inertia(self.lower(), self.b)
-        return int(negative)
+        from .kernels import band_ldlt                  # numba: compiled (or loaded) on first use
+        return int(band_ldlt(self.lower(), self.b)[1])
+
+
+class BandedLDLT:
+    """The L D L^T factors of a :class:`BandedMatrix` (``snapmem.kernels.band_ldlt``); ``solve``
+    takes one or several right-hand sides; ``negative`` is the inertia index of the matrix."""
+
+    singular = False
+
+    def __init__(self, F: np.ndarray, negative: int):
+        self._F, self.negative = F, int(negative)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve K x = rhs for rhs of shape (n,) or (n, k)."""
+        from .kernels import band_ldlt_solve
+        x = np.array(rhs, dtype=float, order="C")
+        band_ldlt_solve(self._F, x.reshape(x.shape[0], -1))
+        return x
 
 
 class BandedLU:
-    """An LU factorisation of a :class:`BandedMatrix`; ``solve`` takes one or several right-hand sides."""
+    """An LU factorisation of a :class:`BandedMatrix`; ``solve`` takes one or several right-hand
+    sides; ``negative`` is the inertia index of the matrix (from LDL^T pivot signs)."""
 
-    def __init__(self, lu, piv, b, singular: bool):
-        self._lu, self._piv, self.b, self.singular = lu, piv, b, singular
+    def __init__(self, lu, piv, b, singular: bool, negative: int):
+        self._lu, self._piv, self.b, self.singular, self.negative = lu, piv, b, singular, int(negative)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve K x = rhs for rhs of shape (n,) or (n, k)."""
@@ -137,14 +168,18 @@ class BorderedMatrix:
         n = self.A.n
         if x.ndim == 2:
             return np.stack([self.matvec(col) for col in x.T], axis=1)
-        top = self.A.matvec(x[:n]) + self.B @ x[n:]
-        return np.concatenate([top, self.C.T @ x[:n] + self.D @ x[n:]])
+        y = np.empty(self.n)
+        y[:n] = self.A.matvec(x[:n])
+        y[:n] += self.B @ x[n:]
+        y[n:] = self.C.T @ x[:n] + self.D @ x[n:]
+        return y
 
     def to_dense(self) -> np.ndarray:
         return np.block([[self.A.to_dense(), self.B], [self.C.T, self.D]])
 
-    def lu(self) -> "BorderedLU":
-        return BorderedLU(self)
+    def lu(self, inner=None) -> "BorderedLU":
+        """Block factorisation; ``inner``, a factorisation of A already made, is reused."""
+        return BorderedLU(self, inner)
 
     def eigenvalues_near_zero(self, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13,
                               max_iterations: int = 40):
@@ -153,11 +188,11 @@ class BorderedMatrix:
 
 
 class BorderedLU:
-    """Factorisation of a :class:`BorderedMatrix`: LU of A and the k x k Schur complement."""
+    """Factorisation of a :class:`BorderedMatrix`: a factorisation of A and the k x k Schur complement."""
 
-    def __init__(self, M: BorderedMatrix):
+    def __init__(self, M: BorderedMatrix, inner=None):
         self.M = M
-        self.inner = M.A.lu()
+        self.inner = M.A.lu() if inner is None else inner
         self.Z = self.inner.solve(M.B)                   # A^-1 B, (n, k)
         self.S = M.D - M.C.T @ self.Z                      # Schur complement (k, k)
         self.singular = bool(self.inner.singular or not np.all(np.isfinite(self.S))
@@ -165,10 +200,13 @@ class BorderedLU:
 
     def _eliminate(self, rhs):
         n = self.M.A.n
-        f, g = rhs[:n], rhs[n:]
-        y = self.inner.solve(f)
-        mu = np.linalg.solve(self.S, g - self.M.C.T @ y)
-        return np.concatenate([y - self.Z @ mu, mu])
+        y = self.inner.solve(rhs[:n])
+        g = rhs[n:] - self.M.C.T @ y
+        mu = g / self.S[0, 0] if self.S.shape == (1, 1) else np.linalg.solve(self.S, g)
+        x = np.empty(rhs.shape)
+        x[:n] = y - self.Z @ mu
+        x[n:] = mu
+        return x
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve M x = rhs (rhs of shape (n,) or (n, m)); one refinement step."""
@@ -177,46 +215,43 @@ class BorderedLU:
 
 
 def eigenvalues_near_zero(M, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13,
-                          tol_others: float = 1e-10, max_iterations: int = 40):
+                          tol_others: float = 1e-10, max_iterations: int = 40, subspace: bool = False):
     """The k eigenvalues of a symmetric matrix nearest zero, ascending, with their eigenvectors.
 
-    Inverse subspace iteration on the factorisation (M needs ``lu()`` and ``n``), with four guard
-    vectors: each iteration is one solve with k + 4 right-hand sides, so the cost is O(n b^2).
-    Rayleigh-Ritz is done on K^-1 (H = V^T K^-1 V uses the solve just made, no product with K),
-    and an iteration stops when the Ritz value nearest zero moves by less than ``tol`` |K| (the
-    others by less than ``tol_others`` |K|) or stops improving (rounding). Warm-started from
-    ``start`` (the vectors of a nearby state) it converges in two or three iterations.
+    Inverse subspace iteration on the factorisation (M needs ``lu()`` and ``n``; ``lu``, one
+    already made, is reused), with four guard vectors: each iteration is one solve with k + 4
+    right-hand sides, so the cost is O(n b^2). Rayleigh-Ritz is done on K^-1 (H = V^T K^-1 V uses
+    the solve just made, no product with K; a compiled kernel), and an iteration stops when the
+    Ritz value nearest zero moves by less than ``tol`` |K| (the others by less than
+    ``tol_others`` |K|) or stops improving (rounding). Warm-started from ``start`` (the vectors,
+    or the whole subspace, of a nearby state) it converges in two or three iterations.
 
     Returns
     -------
     values : ndarray (k,)
     vectors : ndarray (n, k)
+    subspace : ndarray (n, k + 4), only if ``subspace``: the last iterate, to warm-start the next state
     """
+    from .kernels import orthonormal, ritz_step
     n = M.n
     k = min(k, n)
     m = min(n, k + 4)
-    rng = np.random.default_rng(7)
-    V = rng.normal(size=(n, m))
-    if start is not None:
-        start = np.asarray(start).reshape(n, -1)[:, :m]
-        V[:, : start.shape[1]] = start
+    filled = 0 if start is None else min(m, np.asarray(start).reshape(n, -1).shape[1])
+    V = np.empty((n, m))
+    if filled < m:
+        V[:, filled:] = np.random.default_rng(7).normal(size=(n, m))[:, filled:]
+    if filled:
+        V[:, :filled] = np.asarray(start).reshape(n, -1)[:, :filled]
     if lu is None:
         lu = M.lu()
     if lu.singular:
         raise np.linalg.LinAlgError("matrix is exactly singular")
-    V, _ = np.linalg.qr(V)
-    scale = _scale(M)
+    V = orthonormal(V)
+    scale = scale_of(M)
     theta = previous = None
     step = np.inf
     for _ in range(max_iterations):
-        W = lu.solve(np.asfortranarray(V))                   # K^-1 V
-        H = V.T @ W
-        mu, Y = np.linalg.eigh(0.5 * (H + H.T))              # Ritz values of K^-1 on span(V)
-        order = np.argsort(-np.abs(mu))                      # largest |mu|: nearest zero in K
-        mu, Y = mu[order], Y[:, order]
-        theta = 1.0 / mu
-        V, _ = np.linalg.qr(W @ Y)
-        V *= np.sign(np.sum(V * (W @ Y), axis=0))            # keep the Ritz vectors' orientation
+        theta, V = ritz_step(V, np.ascontiguousarray(lu.solve(V)))     # W = K^-1 V
         if previous is not None:
             change = np.abs(theta[:k] - previous[:k])
             first_done = change[0] <= tol * scale or change[0] >= 0.5 * step    # converged, or at rounding
@@ -225,10 +260,11 @@ def eigenvalues_near_zero(M, k: int, start: np.ndarray | None = None, lu=None, t
                 break
         previous = theta
     ascending = np.argsort(theta[:k])
-    return theta[:k][ascending], V[:, :k][:, ascending]
+    values, vectors = theta[:k][ascending], V[:, :k][:, ascending]
+    return (values, vectors, V) if subspace else (values, vectors)
 
 
-def _scale(M) -> float:
+def scale_of(M) -> float:
     """A size of the matrix: its largest diagonal entry in magnitude (band or bordered)."""
     inner = M
     while isinstance(inner, BorderedMatrix):

@@ -10,9 +10,12 @@ dR/dlambda and the tangent: it stays regular at a fold where K is singular, and 
 block elimination with refinement (snapmem.banded.BorderedMatrix), so every solve is O(N).
 
 At every accepted point the smallest eigenvalues of K on the free degrees of freedom and their
-negative count (the inertia index) are recorded. When the count changes between two points, the
-eigenvalue that crossed zero is followed along the arclength and its root found by Brent's
-method, which locates the critical point to near machine precision on the mesh; its null vector
+negative count (the inertia index) are recorded; one factorisation of K serves the tangent and
+them. When the count changes between two points, the critical point is located by Brent's
+method on the arclength: where the parameter turns back (a limit point of a load) as the zero of
+the tangent's parameter component, which vanishes exactly where K is singular and needs no
+eigenvalues on the way; otherwise as the root of the eigenvalue that crossed zero, followed
+along the arclength. Either locates it to near machine precision on the mesh; its null vector
 phi0 classifies it (MODEL.md section 3): a limit point (LP) has phi0 . dR/dlambda != 0, a
 bifurcation point (BP) has phi0 . dR/dlambda = 0.
 
@@ -33,7 +36,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import brentq
 
-from .banded import BorderedMatrix
+from .banded import BorderedMatrix, eigenvalues_near_zero, scale_of
 from .errors import SnapmemError, SolverError, check_int, check_real
 from .newton import equilibrium
 from .scene import Scene
@@ -127,6 +130,7 @@ class Point:
     located: bool = False
     coupling: float = float("nan")   # |phi0 . dR/dlambda| / (|phi0| |dR/dlambda|) at a critical point
     vectors: np.ndarray | None = field(default=None, repr=False)   # eigenvectors of ``eigs``
+    subspace: np.ndarray | None = field(default=None, repr=False)  # the eigen-iteration's last subspace
     measured: dict | None = field(default=None, repr=False)        # cache of the problem's measures
 
     @property
@@ -255,14 +259,25 @@ class LoadProblem:
     def inadmissible(self, x, lam):
         return self.scene.inadmissible(self.state(x, lam)[0])
 
-    def stability(self, K, x, lam, n_eigs, start=None, tol=1e-10, sweeps=40):
-        """(the n_eigs eigenvalues of K nearest zero, ascending; the negative count; their vectors).
+    def factorise(self, J):
+        """(a factorisation of the Jacobian J, one of K within it): made once per point and shared
+        by the tangent and the stability computation."""
+        lu = J.lu()
+        return lu, lu
+
+    def stability(self, K, x, lam, n_eigs, start=None, tol=1e-10, sweeps=40, lu=None):
+        """(the n_eigs eigenvalues of K nearest zero, ascending; the negative count; their vectors;
+        the whole iterated subspace, to warm-start the next point).
 
         ``tol`` bounds the change of the eigenvalue nearest zero relative to |K|; at most ``sweeps``
-        inverse iterations.
+        inverse iterations; ``lu``, K's factorisation if already made.
         """
-        eigs, vectors = K.eigenvalues_near_zero(n_eigs, start, tol=tol, max_iterations=sweeps)
-        return eigs, K.negative_count(), vectors
+        if lu is None:
+            lu = K.lu()
+        eigs, vectors, subspace = eigenvalues_near_zero(K, n_eigs, start, lu, tol, max_iterations=sweeps,
+                                                        subspace=True)
+        negative = getattr(lu, "negative", None)          # the band factorisations carry the inertia
+        return eigs, K.negative_count() if negative is None else negative, vectors, subspace
 
     def measures(self, x, lam) -> dict:
         q, loads = self.state(x, lam)
@@ -316,15 +331,19 @@ class VolumeProblem(LoadProblem):
         d[-1] = -1.0
         return d
 
-    def stability(self, J, x, lam, n_eigs, start=None, tol=1e-10, sweeps=40):
+    def factorise(self, J):
+        inner = J.A.lu()
+        return J.lu(inner), inner
+
+    def stability(self, J, x, lam, n_eigs, start=None, tol=1e-10, sweeps=40, lu=None):
         K = J.A
-        lu = K.lu()
-        eigs, vectors = K.eigenvalues_near_zero(n_eigs, start, lu, tol, max_iterations=sweeps)
-        neg = K.negative_count()
+        if lu is None:
+            lu = K.lu()
+        eigs, neg, vectors, subspace = super().stability(K, x, lam, n_eigs, start, tol, sweeps, lu)
         g = J.C[:, 0]
         if g @ lu.solve(g) < 0:
             neg -= 1
-        return eigs, neg, vectors
+        return eigs, neg, vectors, subspace
 
 
 
@@ -351,15 +370,16 @@ class _Tracer:
     def inner(self, a, b):
         return float(a[:-1] @ (self.wx * b[:-1]) + self.wl * a[-1] * b[-1])
 
-    def tangent(self, x, lam, J, previous: np.ndarray | None):
-        """Unit tangent at (x, lam), oriented along ``previous`` (or the chosen direction)."""
+    def tangent(self, x, lam, J, previous: np.ndarray | None, lu=None):
+        """Unit tangent at (x, lam), oriented along ``previous`` (or the chosen direction);
+        ``lu``: J's factorisation if already made."""
         Fl = self.pb.dF_dlam(x, lam)
         if previous is None:
             row, corner = np.zeros(x.size), [[1.0]]
         else:
             row, corner = self.wx * previous[:-1], [[self.wl * previous[-1]]]
         M = BorderedMatrix(J, Fl, row, corner)
-        lu = M.lu()
+        lu = M.lu(lu)
         if lu.singular:
             raise SolverError("singular extended Jacobian: cannot compute the tangent")
         rhs = np.zeros(x.size + 1)
@@ -370,11 +390,11 @@ class _Tracer:
             t *= self.opt.direction
         return t
 
-    def correct(self, base: Point, s: float):
-        """Newton on the arclength system from the predictor base + s t. Returns (Point, J) or (None, why)."""
+    def correct(self, base: Point, s: float, guess: tuple | None = None):
+        """Newton on the arclength system from the predictor base + s t (or from ``guess``, an
+        (x, lam) nearer the solution). Returns (Point, J) or (None, why)."""
         t = base.tangent
-        x = base.x + s * t[:-1]
-        lam = base.lam + s * t[-1]
+        x, lam = (base.x + s * t[:-1], base.lam + s * t[-1]) if guess is None else guess
         row, corner = self.wx * t[:-1], [[self.wl * t[-1]]]
         last_step = np.inf
         for it in range(self.opt.max_corrector_iterations + 1):
@@ -409,25 +429,53 @@ class _Tracer:
                stability: bool = True):
         """Tangent (oriented along the previous point's) and stability at a converged point.
 
-        At ordinary points at most three inverse iterations from the previous point's vectors
-        (min_eig is reported there, measured within 6e-9 |K| on the balloon's curve; the inertia,
-        which decides stability, is exact from LDL^T); when ``precise`` (locating a critical point)
-        until the Ritz values move by less than 1e-9 |K| or reach rounding.
+        One factorisation of J serves both. At ordinary points at most three inverse iterations
+        from the previous point's subspace (min_eig is reported there, measured within 2e-8 |K|
+        on the balloon's curves; the inertia, which decides stability, is exact from LDL^T); when
+        ``precise`` (locating a critical point) until the Ritz values move by less than 1e-9 |K|
+        or reach rounding.
         """
-        if tangent:
-            p.tangent = self.tangent(p.x, p.lam, J, None if previous is None else previous.tangent)
-        if self.opt.stability and stability:
+        stability = self.opt.stability and stability
+        if not (tangent or stability):
+            return p
+        lu, lu_K = self.pb.factorise(J)
+        if stability:
+            start = None if previous is None else (previous.subspace if previous.subspace is not None
+                                                   else previous.vectors)
             try:
-                p.eigs, p.negative, p.vectors = self.pb.stability(
-                    J, p.x, p.lam, self.opt.n_eigs, None if previous is None else previous.vectors,
-                    tol=1e-9 if precise else 1e-6, sweeps=40 if precise else 3)
+                p.eigs, p.negative, p.vectors, p.subspace = self.pb.stability(
+                    J, p.x, p.lam, self.opt.n_eigs, start, tol=1e-9 if precise else 1e-6,
+                    sweeps=40 if precise else 3, lu=lu_K)
             except np.linalg.LinAlgError as exc:
                 raise SolverError(f"stability: {exc}") from None
+        if tangent:
+            p.tangent = self.tangent(p.x, p.lam, J, None if previous is None else previous.tangent, lu)
+            if previous is None and p.eigs is not None:
+                self._drop_null_modes(p, J)
         return p
 
-    def point_at(self, base: Point, s: float, tangent: bool = True, precise: bool = True, stability: bool = True):
+    def _drop_null_modes(self, p: Point, J):
+        """At a degenerate start the tangent is not unique: K has a null vector that no border
+        couples to (dR/dlambda, or grad V under volume control), so the extended Jacobian is
+        singular too and the branch bifurcates there (a slack shell at rest). The solve then
+        returns rounding amplified along that vector; keep the tangent without it (the minimum-norm
+        one, which continues the branch the load drives)."""
+        volume = isinstance(self.pb, VolumeProblem)
+        K = J.A if volume else J
+        n = p.vectors.shape[0]
+        borders = [self.pb.dF_dlam(p.x, p.lam)[:n]] + ([J.C[:, 0]] if volume else [])
+        t = p.tangent.copy()
+        singular = np.abs(p.eigs) <= 1e-10 * scale_of(K)
+        for phi in p.vectors[:, singular].T:
+            if all(abs(phi @ b) <= 1e-8 * np.linalg.norm(b) for b in borders):
+                t[:n] -= (phi @ t[:n]) * phi
+        if not np.array_equal(t, p.tangent):
+            p.tangent = t / math.sqrt(self.inner(t, t))
+
+    def point_at(self, base: Point, s: float, tangent: bool = True, precise: bool = True, stability: bool = True,
+                 guess: tuple | None = None):
         """The converged point at arclength s from base (with eigenvalues), or raise SolverError."""
-        p, J = self.correct(base, s)
+        p, J = self.correct(base, s, guess)
         if p is None:
             raise SolverError(f"corrector failed while locating: {J}")
         p.s = base.s + s
@@ -578,33 +626,65 @@ def _output(pb, p: Point, name: str) -> float:
     return float(m[name])
 
 
-def _locate_value(tracer, base: Point, p: Point, f, kind: str, known: dict | None = None,
-                  needs_eigenvalues: bool = True):
-    """The point between base and p where f(point, s) = 0, by Brent's method on the arclength.
+class _Found(Exception):
+    """f is within its tolerance of zero at arclength offset ``s``."""
 
-    ``known`` maps arclength offsets to points already computed (the ends). Intermediate
-    points get no tangent (only the located one does); each starts its eigenvalue iteration
-    from the vectors of the last point computed, so it converges in one sweep.
+    def __init__(self, s: float):
+        super().__init__(s)
+        self.s = s
+
+
+def _locate_value(tracer, base: Point, p: Point, f, kind: str, needs_eigenvalues: bool = True,
+                  ftol: float = 0.0):
+    """The point between base and p where f(point, s) = 0, by Brent's method on the arclength s
+    from base (p is at s = ds; f is evaluated there and at base from the points themselves),
+    stopping at s to 1e-13 ds or where |f| <= ``ftol`` (the rounding of f: Brent's method would
+    go on bisecting noise there).
+
+    Every point computed on the way gets its tangent, and the next one starts its corrector from
+    the nearest point along that tangent (one or two iterations instead of three from base).
+    Each starts its eigenvalue iteration (where ``needs_eigenvalues``) from the subspace of the
+    last point computed, so it converges in a sweep or two. The located point is the one Brent's
+    method evaluated last if that is where it stopped, else computed anew.
     """
-    cache = dict(known or {})
+    ds = p.s - base.s
+    cache = {0.0: (base, None), ds: (p, None)}
     last = [base]
 
     def g(s):
         if s not in cache:
-            pt = tracer.point_at(_with_vectors(base, last[0]), s, tangent=False, stability=needs_eigenvalues)[0]
-            cache[s] = pt
-            last[0] = pt
-        return f(cache[s], s)
+            cache[s] = tracer.point_at(_with_vectors(base, last[0]), s, stability=needs_eigenvalues,
+                                       guess=_guess(tracer, base, cache, s))
+            last[0] = cache[s][0]
+        value = f(cache[s][0], s)
+        if abs(value) <= ftol and 0.0 < s < ds:
+            raise _Found(s)
+        return value
 
-    ds = p.s - base.s
     try:
-        s = brentq(g, 0.0, ds, xtol=1e-13 * ds, rtol=4 * np.finfo(float).eps, maxiter=60)
+        try:
+            s = brentq(g, 0.0, ds, xtol=1e-13 * ds, rtol=4 * np.finfo(float).eps, maxiter=60)
+        except _Found as found:
+            s = found.s
+        pt, J = cache.get(s, (None, None))
+        if J is None:
+            pt = tracer.point_at(_with_vectors(base, last[0]), s, guess=_guess(tracer, base, cache, s))[0]
+        elif not needs_eigenvalues and tracer.opt.stability:
+            tracer.finish(pt, J, _with_vectors(base, last[0]), tangent=False, precise=True)
     except (SolverError, ValueError, RuntimeError) as exc:      # RuntimeError: Brent's iteration limit
         log.warning("could not locate %s point: %s", kind, exc)
         return None
-    pt = tracer.point_at(_with_vectors(base, last[0]), s)[0]
     pt.kind, pt.located = kind, True
     return pt
+
+
+def _guess(tracer, base: Point, computed: dict, s: float):
+    """Start of the corrector for the point at arclength s from base: along the tangent of the
+    nearest point computed ({offset: (point, J)}), onto the arclength hyperplane of s."""
+    near = min(computed, key=lambda t: abs(t - s))
+    q = computed[near][0]
+    step = (s - near) / tracer.inner(base.tangent, q.tangent)
+    return q.x + step * q.tangent[:-1], q.lam + step * q.tangent[-1]
 
 
 def _with_vectors(base: Point, donor: Point) -> Point:
@@ -612,7 +692,7 @@ def _with_vectors(base: Point, donor: Point) -> Point:
     if donor is base or donor.vectors is None:
         return base
     clone = Point(base.x, base.lam, base.tangent, base.eigs, base.negative, base.s, base.ds)
-    clone.vectors = donor.vectors
+    clone.vectors, clone.subspace = donor.vectors, donor.subspace
     return clone
 
 
@@ -625,12 +705,14 @@ def _crossing_index(pt: Point, rising_side_positive: bool):
 
 
 def _locate_critical(tracer, base: Point, p: Point):
-    """Locate the zero of the eigenvalue whose sign change altered the inertia between base and p.
+    """Locate the critical point where an eigenvalue's sign change altered the inertia between base and p.
 
-    At the two ends the inertia says which eigenvalue crosses (the smallest non-negative one on
-    the side with fewer negative eigenvalues, the largest negative one on the other). Inside the
-    bracket it is followed by continuity of its eigenvector from the nearest point already
-    computed: there the inertia count is unreliable within rounding of a singular K.
+    Where the parameter turns back between them, it is the zero of the tangent's parameter
+    component. Otherwise it is the zero of the eigenvalue that crossed: at the two ends the
+    inertia says which one (the smallest non-negative one on the side with fewer negative
+    eigenvalues, the largest negative one on the other); inside the bracket it is followed by
+    continuity of its eigenvector from the nearest point already computed: there the inertia
+    count is unreliable within rounding of a singular K.
     """
     located = None
     rising = p.negative > base.negative
@@ -648,7 +730,14 @@ def _locate_critical(tracer, base: Point, p: Point):
             tracked[s] = pt.vectors[:, i]
             return float(pt.eigs[i])
 
-        located = _locate_value(tracer, base, p, crossing, "critical", known={0.0: base, ds: p})
+        if base.tangent[-1] * p.tangent[-1] < 0 and not isinstance(tracer.pb, VolumeProblem):
+            # a limit point of the parameter: there K is singular and the tangent's parameter
+            # component vanishes, a simple zero that needs no eigenvalues on the way
+            scale = math.sqrt(tracer.wl)                # the parameter component of the unit tangent
+            located = _locate_value(tracer, base, p, lambda pt, s: scale * pt.tangent[-1], "critical",
+                                    needs_eigenvalues=False, ftol=1e-12)
+        else:
+            located = _locate_value(tracer, base, p, crossing, "critical")
         if located is None:
             located = _polish_critical(tracer, base, p, base.vectors[:, i_base] + p.vectors[:, i_p] * np.sign(base.vectors[:, i_base] @ p.vectors[:, i_p]))
     if located is None:       # bracketed only: report the nearer end
@@ -684,18 +773,22 @@ def _polish_critical(tracer, base: Point, p: Point, phi: np.ndarray):
 def _classify(tracer, c: Point, base: Point, p: Point) -> str:
     """LP if the null vector couples to dR/dlambda (or the parameter turns back), else BP."""
     pb = tracer.pb
-    _, J = pb.evaluate(c.x, c.lam)
-    K = J.A if isinstance(J, BorderedMatrix) else J
-    lu = K.lu()
-    Fl = pb.dF_dlam(c.x, c.lam)[: K.n]
-    phi = np.random.default_rng(0).normal(size=K.n)
-    if not lu.singular:
-        for _ in range(3):                       # inverse iteration: K is (nearly) singular here
-            phi = lu.solve(phi)
-            phi /= np.linalg.norm(phi)
-    c.coupling = abs(float(phi @ Fl)) / (np.linalg.norm(Fl) + 1e-300)
+    volume = isinstance(pb, VolumeProblem)
+    if c.located and c.vectors is not None:      # K's vector nearest zero, converged at the point
+        phi = c.vectors[:, np.argmin(np.abs(c.eigs))]
+    else:
+        _, J = pb.evaluate(c.x, c.lam)
+        K = J.A if isinstance(J, BorderedMatrix) else J
+        lu = K.lu()
+        phi = np.random.default_rng(0).normal(size=K.n)
+        if not lu.singular:
+            for _ in range(3):                       # inverse iteration: K is (nearly) singular here
+                phi = lu.solve(phi)
+                phi /= np.linalg.norm(phi)
+    Fl = pb.dF_dlam(c.x, c.lam)[: phi.size]
+    c.coupling = abs(float(phi @ Fl)) / (np.linalg.norm(phi) * np.linalg.norm(Fl) + 1e-300)
     turned = base.tangent[-1] * p.tangent[-1] < 0
-    if isinstance(J, BorderedMatrix):            # volume control: classify by the turning
+    if volume:                                   # volume control: classify by the turning
         return "LP" if turned else "BP"
     return "LP" if (c.coupling > 1e-6 or turned) else "BP"
 
@@ -722,7 +815,7 @@ def _touching(tracer, a: Point, b: Point, c: Point):
         return []
     log.info("an eigenvalue may touch zero near s = %.6g: checking", s_min)
     try:
-        mid = tracer.point_at(b, s_min - sb, tangent=False)[0] if s_min > sb else tracer.point_at(a, s_min - sa, tangent=False)[0]
+        mid = tracer.point_at(b, s_min - sb)[0] if s_min > sb else tracer.point_at(a, s_min - sa)[0]   # its tangent classifies
     except SolverError:
         return []
     if mid.negative == b.negative:

@@ -1,10 +1,11 @@
 """Compiled kernels for what numpy cannot vectorise: sequential recursions along the band.
 
-The one here is the LDL^T factorisation without pivoting of a symmetric band matrix, whose
-pivot signs give the inertia (Sylvester's law of inertia). LAPACK has no symmetric indefinite
-band factorisation, and its band eigen-solvers reduce to tridiagonal form in O(n^2 b) work,
-which the profile of a traced branch showed dominating from N ~ 100 nodes; this kernel is
-O(n b^2). Compiled by numba on first use and cached on disk.
+The first is the LDL^T factorisation without pivoting of a symmetric band matrix, whose pivot
+signs give the inertia (Sylvester's law of inertia) and whose factors solve with K wherever
+they are stable (snapmem.banded checks their growth and falls back to LAPACK's pivoted band LU).
+LAPACK has no symmetric indefinite band factorisation, and its band eigen-solvers reduce to
+tridiagonal form in O(n^2 b) work, which the profile of a traced branch showed dominating from
+N ~ 100 nodes; this kernel is O(n b^2). Compiled by numba on first use and cached on disk.
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def band_ldlt_inertia(lower: np.ndarray, b: int):
-    """Negative and zero pivot counts of the LDL^T factorisation of a symmetric band matrix.
+def band_ldlt(lower: np.ndarray, b: int):
+    """LDL^T factorisation without pivoting of a symmetric band matrix: factors, inertia, growth.
 
     Parameters
     ----------
@@ -26,37 +27,115 @@ def band_ldlt_inertia(lower: np.ndarray, b: int):
 
     Returns
     -------
+    F : ndarray (n, b + 1)
+        F[j, 0] = d_j and F[j, m] = L[j + m, j] (unit diagonal implied): one row per column of L,
+        so the factors are a quarter of LAPACK's general band storage and are read in one stream.
     negative, zero : int
         Numbers of negative and of exactly zero pivots; with no zero pivot, ``negative`` is the
-        number of negative eigenvalues of K. A zero pivot (K singular at a leading block) is
-        replaced by a tiny positive one so the count of the rest continues.
+        number of negative eigenvalues of K (Sylvester). A zero pivot (K singular at a leading
+        block) is replaced by a tiny positive one so the count of the rest continues.
+    growth : float
+        max_i sum_k L_ik^2 |d_k| over the largest |K_ij|: 1 for a positive definite K. The
+        factorisation is backward stable with an error of order eps * growth * |K| (the bound of
+        |L| |D| |L^T|); without pivoting a small pivot inside an indefinite K makes it large.
     """
     n = lower.shape[1]
-    d = np.empty(n)
-    L = np.zeros((b + 1, n))          # L[i - j, j] = l_ij, unit diagonal implied
+    F = np.empty((n, b + 1))
     negative = 0
     zero = 0
     scale = 0.0
     for j in range(n):
-        scale = max(scale, abs(lower[0, j]))
+        for m in range(min(b, n - 1 - j) + 1):
+            scale = max(scale, abs(lower[m, j]))
     tiny = 1e-300 + 1e-14 * scale
+    gamma = 0.0
     for j in range(n):
         s = lower[0, j]
+        g = 0.0
         for k in range(max(0, j - b), j):
-            lk = L[j - k, k]
-            s -= lk * lk * d[k]
+            lk = F[k, j - k]
+            t = lk * lk * F[k, 0]
+            s -= t
+            g += abs(t)
         if s < 0.0:
             negative += 1
         elif s == 0.0:
             zero += 1
             s = tiny
-        d[j] = s
+        F[j, 0] = s
+        gamma = max(gamma, g + abs(s))
         for i in range(j + 1, min(n, j + b + 1)):
             t = lower[i - j, j]
             for k in range(max(0, i - b), j):
-                t -= L[i - k, k] * L[j - k, k] * d[k]
-            L[i - j, j] = t / s
-    return negative, zero
+                t -= F[k, i - k] * F[k, j - k] * F[k, 0]
+            F[j, i - j] = t / s
+        for m in range(min(b, n - 1 - j) + 1, b + 1):
+            F[j, m] = 0.0
+    return F, negative, zero, gamma / (scale if scale > 0.0 else 1.0)
+
+
+@njit(cache=True, nogil=True)
+def band_ldlt_solve(F: np.ndarray, x: np.ndarray):
+    """Solve L D L^T x = rhs in place, x of shape (n, m) holding the m right-hand sides on entry
+    (F from :func:`band_ldlt`): a forward and a backward pass over the factors."""
+    n, b = F.shape[0], F.shape[1] - 1
+    cols = x.shape[1]
+    for j in range(n):
+        for m in range(1, min(b, n - 1 - j) + 1):
+            l = F[j, m]
+            for c in range(cols):
+                x[j + m, c] -= l * x[j, c]
+    for j in range(n - 1, -1, -1):
+        inv = 1.0 / F[j, 0]
+        for c in range(cols):
+            s = x[j, c] * inv
+            for m in range(1, min(b, n - 1 - j) + 1):
+                s -= F[j, m] * x[j + m, c]
+            x[j, c] = s
+    return x
+
+
+@njit(cache=True, nogil=True)
+def orthonormal(X: np.ndarray) -> np.ndarray:
+    """Q of the QR factorisation of X (n, m), each column oriented along X's (diag(R) > 0)."""
+    Q, R = np.linalg.qr(X)
+    for c in range(Q.shape[1]):
+        if R[c, c] < 0.0:
+            Q[:, c] = -Q[:, c]
+    return Q
+
+
+@njit(cache=True, nogil=True)
+def ritz_step(V: np.ndarray, W: np.ndarray):
+    """One step of inverse subspace iteration with Rayleigh-Ritz on K^-1.
+
+    V (n, m) has orthonormal columns and W = K^-1 V. Returns the Ritz values of K on span(W),
+    nearest zero first (m,), and the next V: the Ritz vectors W y orthonormalised, each oriented
+    along its W y so that vectors keep their sign from one iteration (or state) to the next.
+    """
+    H = V.T @ W
+    mu, Y = np.linalg.eigh(0.5 * (H + H.T))        # Ritz values of K^-1 on span(V)
+    order = np.argsort(-np.abs(mu))                 # largest |mu|: nearest zero in K
+    return 1.0 / mu[order], orthonormal(W @ np.ascontiguousarray(Y[:, order]))
+
+
+@njit(cache=True, nogil=True)
+def band_matvec(lower: np.ndarray, x: np.ndarray):
+    """K @ x for a symmetric band matrix given by its lower band (b + 1, n) (as :func:`band_ldlt`)
+    and x of shape (n, m): one pass."""
+    b, n = lower.shape[0] - 1, lower.shape[1]
+    cols = x.shape[1]
+    y = np.empty_like(x)
+    for c in range(cols):
+        for i in range(n):
+            y[i, c] = lower[0, i] * x[i, c]
+    for j in range(n):
+        for m in range(1, min(b, n - 1 - j) + 1):
+            k = lower[m, j]
+            for c in range(cols):
+                y[j + m, c] += k * x[j, c]
+                y[j, c] += k * x[j + m, c]
+    return y
 
 
 @njit(cache=True, nogil=True)

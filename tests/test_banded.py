@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from snapmem import build_scene
-from snapmem.banded import BandedMatrix
+from snapmem.banded import BandedLDLT, BandedLU, BandedMatrix, BorderedMatrix
 
 
 @pytest.mark.parametrize("name", ["balloon", "torus"])
@@ -55,3 +55,61 @@ def test_eigenvalues_near_zero_match_dense(name):
     scale = np.abs(eig).max()
     np.testing.assert_allclose(values, nearest, rtol=0, atol=1e-9 * scale)
     np.testing.assert_allclose(np.abs(vectors.T @ vectors), np.eye(3), atol=1e-10)
+
+
+def _random_band(n, b, shift, seed):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(n, n))
+    dense = np.zeros((n, n))
+    for d in range(-b, b + 1):
+        dense += np.diag(np.diagonal(A, d), d)
+    return 0.5 * (dense + dense.T) + shift * np.eye(n)
+
+
+@pytest.mark.parametrize("shift", [6.0, 0.3])          # positive definite; indefinite
+@pytest.mark.parametrize("b", [1, 3, 5])
+def test_ldlt_solves_where_stable_and_carries_the_inertia(b, shift):
+    dense = _random_band(80, b, shift, seed=b)
+    K = BandedMatrix.from_dense(dense, b)
+    lu = K.lu()
+    rhs = np.random.default_rng(0).normal(size=(80, 3))
+    x = lu.solve(rhs)
+    assert np.abs(dense @ x - rhs).max() <= 1e-12 * np.abs(dense).max() * np.abs(x).max()
+    np.testing.assert_allclose(lu.solve(rhs[:, 0]), x[:, 0], rtol=1e-14)
+    assert lu.negative == np.count_nonzero(np.linalg.eigvalsh(dense) < 0) == K.negative_count()
+    np.testing.assert_allclose(K.matvec(x), dense @ x, atol=1e-12 * np.abs(dense @ x).max())
+    if shift > 5:
+        assert isinstance(lu, BandedLDLT)
+
+
+@pytest.mark.parametrize("pivot", [0.0, 1e-13])
+def test_ldlt_falls_back_to_pivoted_lu_on_a_zero_or_tiny_pivot(pivot):
+    """Without pivoting, a tiny first pivot of an indefinite K makes the factors grow by 1/pivot
+    (here 1e13): the solve must come from LAPACK's pivoted LU, and be accurate."""
+    dense = _random_band(40, 3, 0.0, seed=9)
+    dense[0, 0] = pivot
+    dense[1, 0] = dense[0, 1] = 1.0
+    K = BandedMatrix.from_dense(dense, 3)
+    from snapmem.kernels import band_ldlt
+    _, _, zero, growth = band_ldlt(K.lower(), 3)
+    assert zero == 1 if pivot == 0 else growth > 1e10
+    lu = K.lu()
+    assert isinstance(lu, BandedLU) and not lu.singular
+    rhs = np.arange(40.0)
+    x = lu.solve(rhs)
+    assert np.abs(dense @ x - rhs).max() <= 1e-12 * np.abs(dense).max() * np.abs(x).max()
+    assert lu.negative == np.count_nonzero(np.linalg.eigvalsh(dense) < 0)
+
+
+def test_bordered_solve_reuses_the_inner_factorisation_and_is_accurate_at_a_singular_band():
+    """BEMW with refinement: K singular (a fold), the bordered matrix regular."""
+    dense = _random_band(30, 3, 0.0, seed=4)
+    w, V = np.linalg.eigh(dense)
+    dense -= w[0] * np.outer(V[:, 0], V[:, 0])        # K exactly singular along V[:, 0]
+    K = BandedMatrix.from_dense(dense, 3)
+    border = V[:, 0] + 0.1
+    M = BorderedMatrix(K, border, border, [[0.0]])
+    rhs = np.linspace(-1.0, 1.0, 31)
+    exact = np.linalg.solve(M.to_dense(), rhs)
+    for lu in (M.lu(), M.lu(K.lu())):
+        np.testing.assert_allclose(lu.solve(rhs), exact, rtol=0, atol=1e-9 * np.abs(exact).max())
