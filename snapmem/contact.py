@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact_kernels import ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step
+from .contact_kernels import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step, linear_barrier,
+                              linear_max_step, linear_min_gap)
 from .errors import check_real
 from .terms import NodeLocal, NodeTerm, RigidBody
 
@@ -84,16 +85,32 @@ class Contact(NodeTerm):
     def _selected(self, x):
         return x if self._index is None else x[self._index]
 
+    #: (axis, sign, offset) of a gap linear in one coordinate, d = sign * x[:, axis] + offset
+    #: (rod, shell, plane): their barrier, step limit and gaps go through compiled loops
+    linear = None
+
+    def _node_index(self, n: int) -> np.ndarray:
+        if self._index is not None:
+            return self._index
+        if self._all is None or self._all.size != n:
+            object.__setattr__(self, "_all", np.arange(n))
+        return self._all
+
     def gaps(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Gap of every node of the term (in ``nodes`` order), shape (M,) [m]."""
         return self.gap(self._selected(x), y, 0)[0]
 
     def node_local(self, x, y, area, loads, order):
-        idx = self._index
-        if idx is None:
-            if self._all is None or self._all.size != x.shape[0]:
-                object.__setattr__(self, "_all", np.arange(x.shape[0]))
-            idx = self._all
+        idx = self._node_index(x.shape[0])
+        if self.linear is not None:
+            axis, sign, offset = self.linear
+            energy, near, grad, hess = linear_barrier(x, idx, axis, sign, offset, self._coef(area), self.dhat, order)
+            out = NodeLocal(energy, nodes=near)
+            if order >= 1:
+                out.gradient = grad
+            if order >= 2:
+                out.hessian = hess
+            return out
         d = self.gap(x[idx], y, 0)[0]
         near = d < self.dhat                       # only nodes within the barrier width feel it
         idx = idx[near]
@@ -123,6 +140,8 @@ class Contact(NodeTerm):
         return None, None
 
     def admissible(self, x, y):
+        if self.linear is not None and linear_min_gap(x, self._node_index(x.shape[0]), *self.linear) > 0:
+            return None
         d = self.gaps(x, y)
         if np.any(d <= 0):
             i = int(np.argmin(d))
@@ -130,8 +149,20 @@ class Contact(NodeTerm):
             return f"node {node} touches or penetrates {type(self).__name__} (gap {d[i]:.3g} m)"
         return None
 
+    def _coef(self, area):
+        """kappa A_i / dhat of every node (kept for the scene's areas)."""
+        cached = self.__dict__.get("_coef_cache")
+        if cached is None or cached[0] is not area:
+            cached = (area, self.kappa * area / self.dhat)
+            object.__setattr__(self, "_coef_cache", cached)
+        return cached[1]
+
     def max_step(self, x, y, dx, dy):
         """Largest alpha <= 1 keeping every gap above (1 - 0.9) of the way to zero (linear gaps)."""
+        if self.linear is not None:
+            axis, sign, offset = self.linear
+            return float(linear_max_step(x, dx, self._node_index(x.shape[0]), axis, sign, offset,
+                                         FRACTION_TO_BOUNDARY))
         xs, dxs = self._selected(x), self._selected(dx)
         d = self.gap(xs, y, 0)[0]
         dd = self.gap_rate(xs, y, dxs, dy)
@@ -163,6 +194,10 @@ class Rod(Contact):
 
     radius: float
 
+    @property
+    def linear(self):
+        return 0, 1.0, -self.radius
+
     def gap(self, x, y, order):
         return _linear_gap(x[:, 0] - self.radius, np.array([1.0, 0.0]), order)
 
@@ -172,6 +207,10 @@ class Shell(Contact):
     """A rigid cylindrical shell of inner radius ``radius`` [m] around the membrane: d = radius - r."""
 
     radius: float
+
+    @property
+    def linear(self):
+        return 0, -1.0, self.radius
 
     def gap(self, x, y, order):
         return _linear_gap(self.radius - x[:, 0], np.array([-1.0, 0.0]), order)
@@ -183,6 +222,11 @@ class Plane(Contact):
 
     z0: float
     below: bool = False
+
+    @property
+    def linear(self):
+        s = -1.0 if self.below else 1.0
+        return 1, s, -s * self.z0
 
     def gap(self, x, y, order):
         s = -1.0 if self.below else 1.0
@@ -345,6 +389,9 @@ class Ball(Contact):
     def admissible(self, x, y):
         if self.meridian is None:
             return super().admissible(x, y)
+        zero = np.zeros_like(x)
+        if ball_min_gap(x, zero, 0.0, self.meridian.edges, self._centre(y), 0.0, self.radius) > 0:
+            return None
         d = self.gaps(x, y)
         if np.any(d <= 0):
             i = int(np.argmin(d))

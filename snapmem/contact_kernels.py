@@ -194,3 +194,76 @@ def ball_node_max_step(x, dx, zc, dzc, radius, fraction):
         if a > 0.0 and b < 0.0 and disc >= 0.0:
             alpha = min(alpha, fraction * (-b - np.sqrt(disc)) / a)
     return alpha
+
+
+@njit(cache=True, nogil=True)
+def scatter_add(target, index, values):
+    """target[index[i]] += values[i] for every i with index[i] >= 0 (repeats accumulate).
+
+    The node terms' few local entries into the band, gradient and border: numpy's bincount needs
+    a target-sized pass per call and np.add.at is slow; this is one pass over the entries.
+    """
+    for i in range(index.size):
+        j = index[i]
+        if j >= 0:
+            target[j] += values[i]
+
+
+@njit(cache=True, nogil=True)
+def linear_barrier(x, nodes, axis, sign, offset, coef, dhat, order):
+    """Barrier of a gap linear in one coordinate, d_i = sign * x[i, axis] + offset (rod, shell,
+    plane), summed over ``nodes`` with weights coef_i = kappa A_i / dhat.
+
+    Returns (energy, near (K,) the nodes within dhat, gradient (K, 2), hessian (K, 2, 2)) in each
+    node's (r, z); energy is inf if a gap is not positive.
+    """
+    count = 0
+    for k in range(nodes.size):
+        if sign * x[nodes[k], axis] + offset < dhat:
+            count += 1
+    near = np.empty(count, dtype=np.int64)
+    grad = np.zeros((count, 2))
+    hess = np.zeros((count, 2, 2))
+    energy = 0.0
+    m = 0
+    for k in range(nodes.size):
+        i = nodes[k]
+        d = sign * x[i, axis] + offset
+        if d >= dhat:
+            continue
+        near[m] = i
+        if d <= 0.0:
+            energy = np.inf
+            m += 1
+            continue
+        lg = np.log(d / dhat)
+        s = d - dhat
+        c = coef[i]
+        energy += -c * s * s * lg
+        if order >= 1:
+            grad[m, axis] = sign * c * (-2.0 * s * lg - s * s / d)
+        if order >= 2:
+            hess[m, axis, axis] = c * (-2.0 * lg + (dhat - d) * (3.0 * d + dhat) / (d * d))
+        m += 1
+    return energy, near, grad, hess
+
+
+@njit(cache=True, nogil=True)
+def linear_max_step(x, dx, nodes, axis, sign, offset, fraction):
+    """Largest alpha <= 1 keeping every linear gap above (1 - fraction) of its value."""
+    alpha = 1.0
+    for k in range(nodes.size):
+        i = nodes[k]
+        rate = sign * dx[i, axis]
+        if rate < 0.0:
+            alpha = min(alpha, fraction * (sign * x[i, axis] + offset) / -rate)
+    return alpha
+
+
+@njit(cache=True, nogil=True)
+def linear_min_gap(x, nodes, axis, sign, offset):
+    """Smallest linear gap sign * x[i, axis] + offset over ``nodes`` [m]."""
+    out = np.inf
+    for k in range(nodes.size):
+        out = min(out, sign * x[nodes[k], axis] + offset)
+    return out

@@ -20,6 +20,7 @@ import numpy as np
 
 from .banded import BandedMatrix
 from .bordered import BodyMatrix
+from .contact_kernels import scatter_add
 from .errors import SnapmemError, check_real
 from .kinematics import EdgeKinematics
 from .materials import Density
@@ -251,7 +252,7 @@ class Scene:
             stiffness = BandedMatrix(band[: self._band_size].reshape(self.n_band, 3 * self.bandwidth + 1).T,
                                      self.bandwidth)
             if self.bodies:
-                stiffness = BodyMatrix(stiffness, band.border, band.corner)
+                stiffness = BodyMatrix(stiffness, band.border.T, band.corner)
         return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
 
     #: Use the compiled assembly (snapmem.kernels.edge_assembly) for the membrane where it
@@ -309,44 +310,40 @@ class Scene:
     def _add_node_term(self, local, s, gradient, band, order) -> None:
         """Add a node term's gradient and Hessian (node blocks, edge blocks, body parts) in place."""
         nodes = slice(None) if local.nodes is None else local.nodes
+        edges = slice(None) if local.edges is None else local.edges
         if local.gradient is not None:
-            g = gradient[: self.n_node_dofs].reshape(-1, 2)
-            g[nodes] += local.gradient[:, :2]
+            gradient[: self.n_node_dofs].reshape(-1, 2)[nodes] += local.gradient[:, :2]     # nodes are distinct
             gradient[s] += local.gradient[:, 2:].sum(axis=0)
         if local.body_gradient is not None:
             gradient[s] += local.body_gradient
-        if local.edge_gradient is not None:
-            edges = slice(None) if local.edges is None else local.edges
+        if local.edge_gradient is not None:                  # edges share nodes: accumulate
             eg = local.edge_gradient
-            gradient += np.bincount(self.edge_dofs[edges].ravel(), eg[:, :4].ravel(), minlength=gradient.size)
+            scatter_add(gradient, self.edge_dofs[edges].ravel(), eg[:, :4].ravel())
             gradient[s] += eg[:, 4:].sum(axis=0)
         if order < 2:
             return
         if local.hessian is not None:
-            index = self._node_hess_full[nodes].ravel()
-            band.values += np.bincount(index, local.hessian[:, :2, :2].ravel(), minlength=band.values.size)
+            scatter_add(band.values, self._node_hess_full[nodes].ravel(), local.hessian[:, :2, :2].ravel())
         if local.edge_hessian is not None:
-            edges = slice(None) if local.edges is None else local.edges
-            index = self._hess_index.reshape(16, -1)[:, edges].ravel()
-            band.values += np.bincount(index, local.edge_hessian[:4, :4].ravel(), minlength=band.values.size)
+            he = local.edge_hessian[:4, :4]
+            scatter_add(band.values, self._hess_index.reshape(16, -1)[:, edges].ravel(), he.reshape(16, -1).ravel())
 
     def _add_border(self, local, s, band) -> None:
         """Add a node term's node-body and body-body blocks to the border and corner of ``band``."""
         k = len(self.bodies)
         if band.border is None:
-            band.border, band.corner = np.zeros((self.n_band, k)), np.zeros((k, k))
-        cols = np.arange(s.start, s.stop) - self.n_node_dofs
-        if cols.size == 0:
+            band.border, band.corner = np.zeros((k, self.n_band)), np.zeros((k, k))
+        cols = range(s.start - self.n_node_dofs, s.stop - self.n_node_dofs)
+        if not cols:
             return
-        border, corner = band.border, band.corner
-        block = np.ix_(cols, cols)
+        border, corner = band.border, band.corner                   # border stored transposed: (k, n_band)
+        block = (slice(cols.start, cols.stop),) * 2
         if local.hessian is not None:
             nodes = slice(None) if local.nodes is None else local.nodes
             pos = self._node_pos[nodes].ravel()
-            keep = pos >= 0
             h = local.hessian
             for a, col in enumerate(cols):
-                border[:, col] += np.bincount(pos[keep], h[:, :2, 2 + a].ravel()[keep], minlength=self.n_band)
+                scatter_add(border[col], pos, h[:, :2, 2 + a].ravel())
             corner[block] += h[:, 2:, 2:].sum(axis=0)
         if local.body_hessian is not None:
             corner[block] += local.body_hessian
@@ -354,9 +351,8 @@ class Scene:
             edges = slice(None) if local.edges is None else local.edges
             he = local.edge_hessian                                # (4 + k, 4 + k, M)
             epos = self._edge_pos[edges].T.ravel()                 # entry-major (4, M)
-            keep = epos >= 0
             for a, col in enumerate(cols):
-                border[:, col] += np.bincount(epos[keep], he[:4, 4 + a].ravel()[keep], minlength=self.n_band)
+                scatter_add(border[col], epos, he[:4, 4 + a].ravel())
             corner[block] += he[4:, 4:].sum(axis=-1)
 
     def energy(self, q, loads=None) -> float:
