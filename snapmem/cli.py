@@ -233,7 +233,7 @@ def _progress_bar(stream=sys.stderr, width=40):
 def cmd_simulate(args) -> int:
     import dataclasses
     import numpy as np
-    from .robots import experiment
+    from .robots import EXPERIMENTS, events, experiment
     from .dynamics import simulate
     params = parse_sets(args.set)
     ex = experiment(args.scene, **params)
@@ -255,6 +255,8 @@ def cmd_simulate(args) -> int:
     for key in traj.data:
         if key.endswith(("_force", "_z")):
             lines[f"final_{key}"] = float(traj[key][-1])
+    if args.scene in EXPERIMENTS and meta["status"] == "completed":
+        lines.update({f"event_{k}": v for k, v in events(traj).items()})     # snap times, ball heights, ...
     for name, value in lines.items():
         print(f"{name}: {value:.6g}" if isinstance(value, float) else f"{name}: {value}")
     if args.out:
