@@ -43,25 +43,24 @@ def band_ldlt(lower: np.ndarray, b: int):
     F = np.empty((n, b + 1))
     negative = 0
     zero = 0
-    scale = 0.0
-    for j in range(n):
-        for m in range(min(b, n - 1 - j) + 1):
-            scale = max(scale, abs(lower[m, j]))
-    tiny = 1e-300 + 1e-14 * scale
+    scale = 0.0                       # largest |K_ij| so far (one pass: the band is read once)
     gamma = 0.0
     for j in range(n):
         s = lower[0, j]
+        scale = max(scale, abs(s))
         g = 0.0
         for k in range(max(0, j - b), j):
             lk = F[k, j - k]
             t = lk * lk * F[k, 0]
             s -= t
             g += abs(t)
+        for i in range(j + 1, min(n, j + b + 1)):
+            scale = max(scale, abs(lower[i - j, j]))
         if s < 0.0:
             negative += 1
         elif s == 0.0:
             zero += 1
-            s = tiny
+            s = 1e-300 + 1e-14 * scale
         F[j, 0] = s
         gamma = max(gamma, g + abs(s))
         for i in range(j + 1, min(n, j + b + 1)):
