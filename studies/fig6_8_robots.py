@@ -49,12 +49,12 @@ def main(argv=None):
     for scene, sub in force.groupby("scene"):
         plot_xy(sub, "pressure", "force", args.out / f"fig7_{scene}_force.png", group="case", marker="-",
                 title=f"Fig. 7: {scene}, contact force [N] against pressure [Pa]")
-    plot_xy(pd.read_csv(tables / "ball_drop.csv"), "t", "ball_z", args.out / "fig8_ball_drop.png", group="xi",
-            marker="-", title="Fig. 8: ball dropped on the balloon (p = 500 Pa), height against time")
-    plot_xy(pd.read_csv(tables / "ball_rest.csv"), "pressure", "ball_z", args.out / "fig8_ball_rest.png", group="mb",
-            title="Fig. 8: ball height at rest against pressure, by ball mass")
+    plot_xy(pd.read_csv(tables / "ball_drop.csv"), "t", "height", args.out / "fig8_ball_drop.png", group="xi",
+            marker="-", title="Fig. 8: ball drop at 500 Pa, height above the plate [m]")
+    plot_xy(pd.read_csv(tables / "ball_rest.csv"), "pressure", "height", args.out / "fig8_ball_rest.png", group="mb",
+            title="Fig. 8: ball at rest, height above the plate [m]")
     plot_xy(pd.read_csv(tables / "ball_throw.csv"), "phi", "ball_apex", args.out / "fig8_ball_throw.png",
-            title="Fig. 8: apex of the thrown ball against voltage")
+            title="Fig. 8: thrown ball, apex above the plate [m]")
     return cycle
 
 

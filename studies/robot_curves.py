@@ -62,15 +62,19 @@ def gripper(out, nodes, quick):
 
 
 def ball(out, nodes, quick):
+    """Ball tables: ``ball_z`` is the centre's height above the balloon's centre, ``height`` (the
+    paper's b_h) and ``ball_apex`` above the plate it stands on, R = 0.1 m lower [m]."""
     drops, rest, throws = [], [], []
+    R = 0.1
     for xi in ((10.0,) if quick else (0.1, 1.0, 10.0)):
         traj = run("ball_drop", nodes=nodes, xi=xi, t_end=0.5 if quick else 60.0)
-        drops.append(pd.DataFrame({"xi": xi, "t": traj["t"], "ball_z": traj["ball_z"], "min_gap": traj["min_gap"]}))
+        drops.append(pd.DataFrame({"xi": xi, "t": traj["t"], "ball_z": traj["ball_z"], "min_gap": traj["min_gap"],
+                                   "height": traj["ball_z"] + R}))
     static = resting(build_scene("ball_drop", nodes=nodes), 500.0)[-1]
     for mb in ((0.5,) if quick else (0.1, 0.3, 0.5)):
         for p in ((450.0, 500.0) if quick else np.arange(300.0, 575.0, 25.0)):
             q = resting(build_scene("ball_drop", nodes=nodes, mb=mb, pressure=p), p)
-            rest.append({"mb": mb, "pressure": p, "ball_z": q[-1]})
+            rest.append({"mb": mb, "pressure": p, "ball_z": q[-1], "height": q[-1] + R})
     for phi in ((0.0,) if quick else (0.0, 200.0, 400.0, 600.0)):
         traj = run("ball_throw", nodes=nodes, voltage=phi, t_end=0.5 if quick else 3.0)
         throws.append({"phi": phi, **events(traj), "min_gap": float(traj["min_gap"].min())})   # ball_apex: above the plate
