@@ -96,12 +96,68 @@ def band_ldlt_solve(F: np.ndarray, x: np.ndarray):
 
 @njit(cache=True, nogil=True)
 def orthonormal(X: np.ndarray) -> np.ndarray:
-    """Q of the QR factorisation of X (n, m), each column oriented along X's (diag(R) > 0)."""
-    Q, R = np.linalg.qr(X)
-    for c in range(Q.shape[1]):
-        if R[c, c] < 0.0:
-            Q[:, c] = -Q[:, c]
+    """Q of the QR factorisation of X (n, m), each column oriented along X's (diag(R) > 0): Gram-Schmidt
+    with one re-orthogonalisation (loops, not numba's LAPACK bindings, which take seconds to compile)."""
+    n, m = X.shape
+    Q = X.copy()
+    r = np.empty(m)
+    for c in range(m):
+        for _ in range(2):
+            r[:c] = 0.0
+            for i in range(n):
+                for d in range(c):
+                    r[d] += Q[i, d] * Q[i, c]
+            for i in range(n):
+                for d in range(c):
+                    Q[i, c] -= r[d] * Q[i, d]
+        norm = 0.0
+        for i in range(n):
+            norm += Q[i, c] * Q[i, c]
+        norm = np.sqrt(norm)
+        for i in range(n):
+            Q[i, c] /= norm
     return Q
+
+
+@njit(cache=True, nogil=True)
+def symmetric_eig(A: np.ndarray):
+    """Eigenvalues and eigenvectors (columns) of a small symmetric matrix by cyclic Jacobi rotations,
+    to rounding (the subspace iteration's m x m Rayleigh-Ritz matrix; m = k + 4)."""
+    m = A.shape[0]
+    A = A.copy()
+    V = np.eye(m)
+    for _ in range(60):
+        off = 0.0
+        total = 0.0
+        for p in range(m):
+            for q in range(m):
+                total += A[p, q] * A[p, q]
+                if p != q:
+                    off += A[p, q] * A[p, q]
+        if off <= 1e-32 * total:
+            break
+        for p in range(m - 1):
+            for q in range(p + 1, m):
+                apq = A[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (A[q, q] - A[p, p]) / (2.0 * apq)
+                t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(m):
+                    akp, akq = A[k, p], A[k, q]
+                    A[k, p], A[k, q] = c * akp - s * akq, s * akp + c * akq
+                for k in range(m):
+                    apk, aqk = A[p, k], A[q, k]
+                    A[p, k], A[q, k] = c * apk - s * aqk, s * apk + c * aqk
+                for k in range(m):
+                    vkp, vkq = V[k, p], V[k, q]
+                    V[k, p], V[k, q] = c * vkp - s * vkq, s * vkp + c * vkq
+    w = np.empty(m)
+    for p in range(m):
+        w[p] = A[p, p]
+    return w, V
 
 
 @njit(cache=True, nogil=True)
@@ -112,10 +168,33 @@ def ritz_step(V: np.ndarray, W: np.ndarray):
     nearest zero first (m,), and the next V: the Ritz vectors W y orthonormalised, each oriented
     along its W y so that vectors keep their sign from one iteration (or state) to the next.
     """
-    H = V.T @ W
-    mu, Y = np.linalg.eigh(0.5 * (H + H.T))        # Ritz values of K^-1 on span(V)
-    order = np.argsort(-np.abs(mu))                 # largest |mu|: nearest zero in K
-    return 1.0 / mu[order], orthonormal(W @ np.ascontiguousarray(Y[:, order]))
+    n, m = V.shape
+    H = np.zeros((m, m))
+    for i in range(n):
+        for a in range(m):
+            for c in range(m):
+                H[a, c] += V[i, a] * W[i, c]
+    for a in range(m):
+        for c in range(a):
+            H[a, c] = H[c, a] = 0.5 * (H[a, c] + H[c, a])
+    mu, Y = symmetric_eig(H)                        # Ritz values of K^-1 on span(V)
+    order = np.arange(m)                            # by |mu| descending: nearest zero in K first
+    for a in range(1, m):
+        c = a
+        while c > 0 and abs(mu[order[c]]) > abs(mu[order[c - 1]]):
+            order[c], order[c - 1] = order[c - 1], order[c]
+            c -= 1
+    X = np.zeros((n, m))
+    for i in range(n):
+        for c in range(m):
+            s = 0.0
+            for a in range(m):
+                s += W[i, a] * Y[a, order[c]]
+            X[i, c] = s
+    theta = np.empty(m)
+    for c in range(m):
+        theta[c] = 1.0 / mu[order[c]]
+    return theta, orthonormal(X)
 
 
 @njit(cache=True, nogil=True)
