@@ -11,6 +11,7 @@ iteration's, so an iteration costs one assembly unless a step is cut.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
@@ -151,13 +152,13 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
     for _ in range(options.max_iterations):
         report.history.append(norm)
         floor_tol = max(tol, ev.residual_floor)
-        if norm <= floor_tol or (last_step <= 1e-10 * np.max(np.abs(q)) and norm <= 1e3 * floor_tol):
+        if norm <= floor_tol or (norm <= 1e3 * floor_tol and last_step <= 1e-10 * np.abs(q).max()):
             # converged; or the last Newton step was at the rounding of q and the residual is within
             # 1e3 of the tolerance: the rounding floor of a stiff state (a law near its lock). A
             # slowly converging singular problem takes steps far larger than that.
             report.converged, report.reason = True, "converged"
             break
-        if not np.isfinite(norm):
+        if not math.isfinite(norm):
             report.reason = "residual is not finite"
             break
         lu = ev.stiffness.lu()
@@ -169,7 +170,7 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
         dq[free] = dx
         alpha = min(1.0, max_step(q, dq))
         squared = float(ev.residual @ ev.residual)
-        slope = float(ev.residual @ dx)
+        slope = float(ev.residual @ dx) if merit == "energy" else 0.0
         report.iterations += 1
         outside = None
         for _cut in range(options.max_cuts + 1):
@@ -184,7 +185,7 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
                         break
                 else:
                     trial_squared = float(ev_trial.residual @ ev_trial.residual)
-                    if np.isfinite(trial_squared) and trial_squared <= (1.0 - 1e-4 * alpha) * squared:
+                    if math.isfinite(trial_squared) and trial_squared <= (1.0 - 1e-4 * alpha) * squared:
                         break
             alpha *= 0.5
             report.step_cuts += 1
@@ -195,7 +196,7 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
             break
         q, ev = trial, ev_trial
         norm = _norm(ev.residual)
-        last_step = alpha * float(np.max(np.abs(dx)))
+        last_step = alpha * float(np.abs(dx).max()) if dx.size else 0.0
     report.residual_norm = norm
     if not report.converged and norm <= max(tol, ev.residual_floor):
         report.converged, report.reason = True, "converged"
@@ -203,7 +204,7 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
 
 
 def _norm(r: np.ndarray) -> float:
-    return float(np.max(np.abs(r))) if r.size else 0.0
+    return float(np.abs(r).max()) if r.size else 0.0
 
 
 @dataclass
