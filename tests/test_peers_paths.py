@@ -90,3 +90,15 @@ def test_peers_richardson_torus_curve_meets_the_ode():
     assert np.array_equal(shape, radii) and np.max(np.abs(p - p_ode)) / scale < 3e-5
     _, p_one = peers.path_curve("torus", (48,), radii)
     assert np.max(np.abs(p_one - p_ode)) / scale > 1e-3                 # one mesh alone: 2e-3
+
+
+def test_sfepy_study_on_the_committed_sfepy_steps(tmp_path):
+    """studies/sfepy_balloon.py --quick --sfepy-from (SfePy itself is optional and slow): the
+    snapmem path at SfePy's own stretch steps, at equal or better error."""
+    module = study("sfepy_balloon")
+    table = module.main(["--quick", "--sfepy-from", str(STUDIES.parent / "results" / "sfepy_balloon.csv"),
+                         "--out", str(tmp_path / "sfepy.csv")])
+    summary = table[(table["table"] == "equal_error") & (table["snapmem_method"] == "snapmem_path")].iloc[0]
+    sfepy = table[(table["table"] == "run") & (table["method"] == "sfepy")].iloc[0]
+    assert bool(summary["sfepy_cached"]) and summary["snapmem_points"] == sfepy["points"] >= 10
+    assert summary["snapmem_error"] <= summary["error"]
