@@ -267,3 +267,16 @@ def linear_min_gap(x, nodes, axis, sign, offset):
     for k in range(nodes.size):
         out = min(out, sign * x[nodes[k], axis] + offset)
     return out
+
+
+@njit(cache=True, nogil=True)
+def state_check(q, radius_dofs):
+    """-1 if q is finite and every listed radius positive; -2 if q has NaN or inf; else the
+    first radius degree of freedom that is not positive (the scene's domain check, one pass)."""
+    for i in range(q.size):
+        if not np.isfinite(q[i]):
+            return -2
+    for k in range(radius_dofs.size):
+        if q[radius_dofs[k]] <= 0.0:
+            return radius_dofs[k]
+    return -1

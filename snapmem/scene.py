@@ -20,7 +20,7 @@ import numpy as np
 
 from .banded import BandedMatrix
 from .bordered import BodyMatrix
-from .contact_kernels import scatter_add
+from .contact_kernels import scatter_add, state_check
 from .errors import SnapmemError, check_real
 from .kinematics import EdgeKinematics
 from .materials import Density
@@ -119,6 +119,8 @@ class Scene:
         self._build_dof_map()
         self._free_radius = np.ones(meridian.nodes, dtype=bool)          # nodes whose radius may move
         self._free_radius[[d // 2 for d in self.fixed if d % 2 == 0 and d < 2 * meridian.nodes]] = False
+        self._free_radius_dofs = 2 * np.flatnonzero(self._free_radius)
+        self._domain_terms = [t for t in self.density_terms if t.restricts_domain]
 
     # ----------------------------------------------------------------------------------------
     # numbering of the free degrees of freedom and the scatter of local blocks into the band
@@ -381,16 +383,15 @@ class Scene:
     # the domain every state must stay in
     def inadmissible(self, q: np.ndarray) -> str | None:
         """Why q is outside the model's domain (negative radius, zero length, material lock), or None."""
-        if not np.all(np.isfinite(q)):
+        bad = state_check(q, self._free_radius_dofs)
+        if bad == -2:
             return "state has NaN or inf"
-        r = q[: self.n_node_dofs: 2]
-        free_r = self._free_radius
-        if np.any(r[free_r] <= 0):
-            return f"radius of node {int(np.flatnonzero(free_r & (r <= 0))[0])} is not positive"
+        if bad >= 0:
+            return f"radius of node {bad // 2} is not positive"
         kin = self.kinematics(q)
-        if np.any(kin.l <= 0):
+        if kin.l.min() <= 0:
             return "an edge has collapsed to zero length"
-        for term in self.density_terms:
+        for term in self._domain_terms:
             ok = term.admissible(kin)
             if not np.all(ok):
                 return f"edge {int(np.flatnonzero(~ok)[0])} is outside the domain of {term!r}"

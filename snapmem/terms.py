@@ -41,6 +41,12 @@ class DensityTerm(Term):
     def admissible(self, kin: EdgeKinematics) -> np.ndarray:
         return np.ones(kin.l.shape, dtype=bool)
 
+    @property
+    def restricts_domain(self) -> bool:
+        """Whether :meth:`admissible` can say no where stretches are positive; if not, the scene
+        skips it (positive radii and lengths already make every stretch positive)."""
+        return type(self).admissible is not DensityTerm.admissible
+
 
 class EdgeTerm(Term):
     """A term that gives its energy directly per edge, in the edge's 4 coordinates."""
@@ -69,6 +75,11 @@ class Stretching(DensityTerm):
 
     def admissible(self, kin):
         return self.law.admissible(kin.lam1, kin.lam2)
+
+    @property
+    def restricts_domain(self) -> bool:
+        """Whether the law's domain is smaller than positive stretches (Gent's lock)."""
+        return type(self.law).admissible is not Law.admissible
 
 
 @dataclass(frozen=True)
