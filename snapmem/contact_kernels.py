@@ -280,3 +280,21 @@ def state_check(q, radius_dofs):
         if q[radius_dofs[k]] <= 0.0:
             return radius_dofs[k]
     return -1
+
+
+@njit(cache=True, nogil=True)
+def volume_gradient(q, edges, n_dof):
+    """dV/dq of the swept volume V = sum_e (pi/3)(r_a^2 + r_a r_b + r_b^2)(z_b - z_a), shape (n_dof,)
+    [m^2]: the pressure's load derivative (the same formulas as PressureWork.volume_local)."""
+    g = np.zeros(n_dof)
+    c = np.pi / 3.0
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        ra, za, rb, zb = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
+        dz = zb - za
+        s = c * (ra * ra + ra * rb + rb * rb)
+        g[2 * a] += c * (2.0 * ra + rb) * dz
+        g[2 * a + 1] -= s
+        g[2 * b] += c * (ra + 2.0 * rb) * dz
+        g[2 * b + 1] += s
+    return g

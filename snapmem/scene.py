@@ -20,7 +20,7 @@ import numpy as np
 
 from .banded import BandedMatrix
 from .bordered import BodyMatrix
-from .contact_kernels import scatter_add, state_check
+from .contact_kernels import scatter_add, state_check, volume_gradient
 from .errors import SnapmemError, check_real
 from .kinematics import EdgeKinematics
 from .materials import Density
@@ -369,15 +369,21 @@ class Scene:
         loads = self.resolve_loads(loads)
         if name not in loads:
             raise SnapmemError(f"load {name!r}: this scene has no such load; it has {sorted(loads) or 'none'}")
-        kin = self.kinematics(q)
-        local = np.zeros((kin.l.size, 4))
-        for term in self.density_terms:
-            if name in term.loads:
-                local += _chain_rule(kin, term.load_density(kin, loads, name), self.weight, 1)[0]
-        for term in self.edge_terms:
-            if name in term.loads:
-                local += term.load_gradient(kin, loads, name)
-        return np.bincount(self.edge_dofs.ravel(), local.ravel(), minlength=q.size)[self.free]   # node terms carry no load
+        out = np.zeros(q.size)
+        kin = None
+        for term in self.density_terms + self.edge_terms:
+            if name not in term.loads:
+                continue
+            if type(term) is PressureWork:                     # -dV/dq, compiled
+                out -= volume_gradient(q, self.meridian.edges, q.size)
+                continue
+            kin = self.kinematics(q) if kin is None else kin
+            if isinstance(term, DensityTerm):
+                local = _chain_rule(kin, term.load_density(kin, loads, name), self.weight, 1)[0]
+            else:
+                local = term.load_gradient(kin, loads, name)
+            out += np.bincount(self.edge_dofs.ravel(), local.ravel(), minlength=q.size)
+        return out[self.free]                                  # node terms carry no load
 
     # ----------------------------------------------------------------------------------------
     # the domain every state must stay in
