@@ -28,16 +28,19 @@ def test_closed_meridian_band_is_five_open_is_three():
     assert build_scene("balloon", nodes=51).bandwidth == 3
 
 
-@pytest.mark.parametrize("b", [1, 3, 5])
-@pytest.mark.parametrize("shift", [-2.0, 0.0, 0.7])
-def test_ldlt_inertia_counts_negative_eigenvalues_of_random_band_matrices(b, shift):
-    rng = np.random.default_rng(b * 100 + int(shift * 10) + 50)
-    n = 60
+def _random_band(n, b, shift, seed):
+    rng = np.random.default_rng(seed)
     A = rng.normal(size=(n, n))
     dense = np.zeros((n, n))
     for d in range(-b, b + 1):
         dense += np.diag(np.diagonal(A, d), d)
-    dense = 0.5 * (dense + dense.T) - shift * np.eye(n)
+    return 0.5 * (dense + dense.T) + shift * np.eye(n)
+
+
+@pytest.mark.parametrize("b", [1, 3, 5])
+@pytest.mark.parametrize("shift", [-2.0, 0.0, 0.7])
+def test_ldlt_inertia_counts_negative_eigenvalues_of_random_band_matrices(b, shift):
+    dense = _random_band(60, b, -shift, seed=b * 100 + int(shift * 10) + 50)
     K = BandedMatrix.from_dense(dense, b)
     assert K.negative_count() == np.count_nonzero(np.linalg.eigvalsh(dense) < 0)
 
@@ -55,15 +58,6 @@ def test_eigenvalues_near_zero_match_dense(name):
     scale = np.abs(eig).max()
     np.testing.assert_allclose(values, nearest, rtol=0, atol=1e-9 * scale)
     np.testing.assert_allclose(np.abs(vectors.T @ vectors), np.eye(3), atol=1e-10)
-
-
-def _random_band(n, b, shift, seed):
-    rng = np.random.default_rng(seed)
-    A = rng.normal(size=(n, n))
-    dense = np.zeros((n, n))
-    for d in range(-b, b + 1):
-        dense += np.diag(np.diagonal(A, d), d)
-    return 0.5 * (dense + dense.T) + shift * np.eye(n)
 
 
 @pytest.mark.parametrize("shift", [6.0, 0.3])          # positive definite; indefinite
