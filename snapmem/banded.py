@@ -1,12 +1,13 @@
-"""Symmetric banded matrices in LAPACK general-band storage, their LU solves and eigenvalues.
+"""Symmetric banded matrices stored as their lower band, their solves and eigenvalues.
 
-A matrix K of order n and half-bandwidth b is stored as ``ab`` of shape (3b + 1, n) with
-K[i, j] = ab[2b + i - j, j]; the first b rows are the workspace LAPACK's ``gbtrf`` needs for
-partial pivoting, so assembly writes straight into the array that is factorised (no copy into
-another layout). Solves factorise K as L D L^T without pivoting (a compiled kernel reading the
-lower band, with a quarter of the storage of the LU) wherever that is stable: its element growth
-is measured and, if large (a small pivot inside an indefinite K, which Cholesky could not factor
-at all) or a pivot is zero, LAPACK's band LU with partial pivoting is used instead.
+A matrix K of order n and half-bandwidth b is stored as ``lower`` of shape (b + 1, n) with
+K[i, j] = lower[i - j, j] for 0 <= i - j <= b: assembly writes only these entries, a third of
+LAPACK's general-band storage for b = 3 (the sizes where the band outgrows the caches were
+measured 35-50% slower per dof in that storage). Solves factorise K as L D L^T without pivoting
+(a compiled kernel on the lower band) wherever that is stable: its element growth is measured
+and, if large (a small pivot inside an indefinite K, which Cholesky could not factor at all) or a
+pivot is zero, LAPACK's band LU with partial pivoting is used instead, on the general-band
+storage built for it.
 """
 
 from __future__ import annotations
@@ -22,54 +23,73 @@ LDLT_GROWTH_LIMIT = 1e3
 
 
 class BandedMatrix:
-    """Square symmetric band matrix in general-band storage (see module docstring).
+    """Square symmetric band matrix, stored as its lower band (see module docstring).
 
     Parameters
     ----------
     ab : ndarray, shape (3b + 1, n)
-        Band storage; rows 0..b-1 are LU workspace and are ignored on input.
+        General-band storage, K[i, j] = ab[2b + i - j, j]; only its lower band (rows 2b..3b)
+        is kept, as a view. Assembly builds the lower band directly: :meth:`from_lower`.
     b : int
         Half-bandwidth.
     """
 
     def __init__(self, ab: np.ndarray, b: int):
-        self.ab = ab
         self.b = b
+        self._lower = ab[2 * b:]
+
+    @classmethod
+    def from_lower(cls, lower: np.ndarray, b: int) -> "BandedMatrix":
+        """The matrix whose lower band is ``lower`` (b + 1, n): lower[i - j, j] = K[i, j] (no copy)."""
+        M = cls.__new__(cls)
+        M.b, M._lower = b, lower
+        return M
 
     @property
     def n(self) -> int:
-        return self.ab.shape[1]
+        return self._lower.shape[1]
+
+    @property
+    def ab(self) -> np.ndarray:
+        """General-band storage (3b + 1, n) of both triangles, Fortran order, built on demand (a new
+        array: LAPACK's pivoted LU and the benchmark's dgbsv take it)."""
+        n, b, lower = self.n, self.b, self._lower
+        ab = np.zeros((3 * b + 1, n), order="F")
+        ab[2 * b:] = lower
+        for d in range(1, b + 1):                       # K[j - d, j] = K[j, j - d] = lower[d, j - d]
+            ab[2 * b - d, d:] = lower[d, : n - d]
+        return ab
 
     @classmethod
     def from_dense(cls, K: np.ndarray, b: int) -> "BandedMatrix":
-        """Band storage of a dense matrix (entries outside the band are dropped)."""
+        """Band storage of a symmetric dense matrix (its lower band; entries outside it are dropped)."""
         n = K.shape[0]
-        ab = np.zeros((3 * b + 1, n), order="F")
-        for d in range(-b, b + 1):          # d = i - j
-            diag = np.diagonal(K, -d)
-            if d >= 0:
-                ab[2 * b + d, : n - d] = diag
-            else:
-                ab[2 * b + d, -d:] = diag
-        return cls(ab, b)
+        lower = np.zeros((b + 1, n))
+        for d in range(b + 1):
+            lower[d, : n - d] = np.diagonal(K, -d)
+        return cls.from_lower(lower, b)
 
     def to_dense(self) -> np.ndarray:
         n, b = self.n, self.b
         K = np.zeros((n, n))
-        for d in range(-b, b + 1):
-            i = np.arange(max(0, d), min(n, n + d))
-            K[i, i - d] = self.ab[2 * b + d, i - d]
+        for d in range(b + 1):
+            i = np.arange(d, n)
+            K[i, i - d] = K[i - d, i] = self._lower[d, : n - d]
         return K
+
+    def add_diagonal(self, d: np.ndarray) -> None:
+        """K += diag(d) in place, d of shape (n,)."""
+        self._lower[0] += d
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """K @ x for x of shape (n,) or (n, m) (from the lower band: K is symmetric)."""
         from .kernels import band_matvec
         x = np.asarray(x, dtype=float)
-        return band_matvec(self.lower(), np.ascontiguousarray(x.reshape(x.shape[0], -1))).reshape(x.shape)
+        return band_matvec(self._lower, np.ascontiguousarray(x.reshape(x.shape[0], -1))).reshape(x.shape)
 
     def lower(self) -> np.ndarray:
-        """Lower symmetric band form (b + 1, n) as ``scipy.linalg.eig_banded`` takes it."""
-        return self.ab[2 * self.b:]
+        """Lower symmetric band form (b + 1, n) as ``scipy.linalg.eig_banded`` takes it (the storage itself)."""
+        return self._lower
 
     def lu(self):
         """A factorisation for solves, with the inertia: :class:`BandedLDLT` where it is stable
@@ -81,7 +101,7 @@ class BandedMatrix:
         return self.pivoted_lu(negative)
 
     def pivoted_lu(self, negative: int | None = None) -> "BandedLU":
-        """LU factorisation with partial pivoting (LAPACK dgbtrf) of a copy of this matrix."""
+        """LU factorisation with partial pivoting (LAPACK dgbtrf) of this matrix in general-band storage."""
         lu, piv, info = dgbtrf(self.ab, self.b, self.b)
         return BandedLU(lu, piv, self.b, singular=info > 0,
                         negative=self.negative_count() if negative is None else negative)

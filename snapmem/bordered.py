@@ -55,7 +55,7 @@ class BodyMatrix(BorderedMatrix):
     def add_diagonal(self, d: np.ndarray) -> None:
         """K += diag(d) in place, d of shape (n,)."""
         nb = self.A.n
-        self.A.ab[2 * self.A.b] += d[:nb]
+        self.A.add_diagonal(d[:nb])
         self.D = self.D + np.diag(d[nb:])
 
     def schur(self) -> np.ndarray:

@@ -285,10 +285,7 @@ class _Stepper:
             residual = ev.residual + inertia_free * d - momentum
             energy = ev.energy + 0.5 * float(d @ (inertia_free * d)) - float(momentum @ d)   # + const
             K = ev.stiffness
-            if hasattr(K, "add_diagonal"):
-                K.add_diagonal(inertia_free)
-            else:
-                K.ab[2 * K.b] += inertia_free
+            K.add_diagonal(inertia_free)
             return Evaluation(energy, ev.gradient, residual, K, ev.residual_floor)
 
         guess = q + h * v if accel is None else q + h * v + (h * h) * accel

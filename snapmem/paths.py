@@ -260,20 +260,22 @@ class _UnitRow:
     """Where row and column k of a symmetric band matrix (order n, half-bandwidth b) are stored."""
 
     def __init__(self, b: int, n: int, k: int):
-        j = np.arange(max(0, k - b), min(n, k + b + 1))
+        left = np.arange(max(0, k - b), k + 1)                # K[k, j] = lower[k - j, j], j <= k
+        right = np.arange(k, min(n, k + b + 1))               # K[k, j] = lower[j - k, k], j >= k
         self.k, self.b = k, b
-        self.row = (2 * b + k - j, j)
-        self.column = (2 * b + j - k, np.full(j.size, k))
+        self.left, self.right = (k - left, left), (right - k, np.full(right.size, k))
         self.dense = np.zeros(n)
 
     def take(self, K) -> np.ndarray:
         """Replace row and column k of K by the identity's (in place, K stays symmetric); return
         the old row k, dense."""
+        lower = K.lower()
         row = self.dense.copy()
-        row[self.row[1]] = K.ab[self.row]
-        K.ab[self.row] = 0.0
-        K.ab[self.column] = 0.0
-        K.ab[2 * self.b, self.k] = 1.0
+        row[self.left[1]] = lower[self.left]
+        row[self.k + self.right[0]] = lower[self.right]
+        lower[self.left] = 0.0
+        lower[self.right] = 0.0
+        lower[0, self.k] = 1.0
         return row
 
 

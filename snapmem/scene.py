@@ -150,15 +150,17 @@ class Scene:
         i, j = lpos[:, :, None], lpos[:, None, :]                # (E, 4, 1), (E, 1, 4)
         valid = (i >= 0) & (j >= 0)
         self.bandwidth = b = max(1, int(np.max(np.where(valid, np.abs(i - j), 0))))
-        rows = 3 * b + 1
+        rows = b + 1
         self._band_size = rows * self.n_band
-        flat = np.where(valid, j * rows + (2 * b + i - j), self._band_size)   # ab.T (C order); fixed -> trash slot
+        # the lower band, lower[i - j, j] = K[i, j] (i >= j), flattened as lower.T in C order; the
+        # upper triangle's entries (i < j, the symmetric twins) and fixed dofs go to a trash slot
+        flat = np.where(valid & (i >= j), j * rows + (i - j), self._band_size)
         self._hess_index = flat.transpose(1, 2, 0).ravel()                 # entry-major, like the local Hessians
         # node terms: each node's 2x2 block (r_i, z_i) into the same band
         npos = position[2 * np.arange(n_nodes)[:, None] + np.arange(2)]          # (N, 2)
         i, j = npos[:, :, None], npos[:, None, :]
         valid = (i >= 0) & (j >= 0)
-        self._node_hess_full = np.where(valid, j * rows + (2 * b + i - j), self._band_size)   # (N, 2, 2)
+        self._node_hess_full = np.where(valid & (i >= j), j * rows + (i - j), self._band_size)   # (N, 2, 2)
         self._node_pos = npos
         lv = m.node_lengths()
         area = 2.0 * np.pi * m.r * lv
@@ -251,8 +253,8 @@ class Scene:
             return Evaluation(energy, None, None, None)
         stiffness = None
         if order >= 2:
-            stiffness = BandedMatrix(band[: self._band_size].reshape(self.n_band, 3 * self.bandwidth + 1).T,
-                                     self.bandwidth)
+            stiffness = BandedMatrix.from_lower(band[: self._band_size].reshape(self.n_band, self.bandwidth + 1).T,
+                                                self.bandwidth)
             if self.bodies:
                 stiffness = BodyMatrix(stiffness, band.border.T, band.corner)
         return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
