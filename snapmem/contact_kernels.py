@@ -197,19 +197,6 @@ def ball_node_max_step(x, dx, zc, dzc, radius, fraction):
 
 
 @njit(cache=True, nogil=True)
-def scatter_add(target, index, values):
-    """target[index[i]] += values[i] for every i with index[i] >= 0 (repeats accumulate).
-
-    The node terms' few local entries into the band, gradient and border: numpy's bincount needs
-    a target-sized pass per call and np.add.at is slow; this is one pass over the entries.
-    """
-    for i in range(index.size):
-        j = index[i]
-        if j >= 0:
-            target[j] += values[i]
-
-
-@njit(cache=True, nogil=True)
 def linear_barrier(x, nodes, axis, sign, offset, coef, dhat, order):
     """Barrier of a gap linear in one coordinate, d_i = sign * x[i, axis] + offset (rod, shell,
     plane), summed over ``nodes`` with weights coef_i = kappa A_i / dhat.
@@ -267,34 +254,3 @@ def linear_min_gap(x, nodes, axis, sign, offset):
     for k in range(nodes.size):
         out = min(out, sign * x[nodes[k], axis] + offset)
     return out
-
-
-@njit(cache=True, nogil=True)
-def state_check(q, radius_dofs):
-    """-1 if q is finite and every listed radius positive; -2 if q has NaN or inf; else the
-    first radius degree of freedom that is not positive (the scene's domain check, one pass)."""
-    for i in range(q.size):
-        if not np.isfinite(q[i]):
-            return -2
-    for k in range(radius_dofs.size):
-        if q[radius_dofs[k]] <= 0.0:
-            return radius_dofs[k]
-    return -1
-
-
-@njit(cache=True, nogil=True)
-def volume_gradient(q, edges, n_dof):
-    """dV/dq of the swept volume V = sum_e (pi/3)(r_a^2 + r_a r_b + r_b^2)(z_b - z_a), shape (n_dof,)
-    [m^2]: the pressure's load derivative (the same formulas as PressureWork.volume_local)."""
-    g = np.zeros(n_dof)
-    c = np.pi / 3.0
-    for e in range(edges.shape[0]):
-        a, b = edges[e, 0], edges[e, 1]
-        ra, za, rb, zb = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
-        dz = zb - za
-        s = c * (ra * ra + ra * rb + rb * rb)
-        g[2 * a] += c * (2.0 * ra + rb) * dz
-        g[2 * a + 1] -= s
-        g[2 * b] += c * (ra + 2.0 * rb) * dz
-        g[2 * b + 1] += s
-    return g

@@ -20,7 +20,7 @@ import numpy as np
 
 from .banded import BandedMatrix
 from .bordered import BodyMatrix
-from .contact_kernels import scatter_add, state_check, volume_gradient
+from .kernels import scatter_add, state_check, volume_gradient
 from .errors import SnapmemError, check_real
 from .kinematics import EdgeKinematics
 from .materials import Density
