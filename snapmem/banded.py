@@ -16,6 +16,8 @@ import numpy as np
 from scipy.linalg import eig_banded
 from scipy.linalg.lapack import dgbtrf, dgbtrs
 
+from .kernels import band_ldlt, band_ldlt_solve, band_matvec, orthonormal, ritz_step   # numba: compiled on first use
+
 #: Largest element growth of the LDL^T factors (``snapmem.kernels.band_ldlt``: 1 for a positive
 #: definite K) at which they are used for solves; beyond it the pivoted band LU is. At 1e3 the
 #: solve's backward error is at most about 1e3 eps |K|, no worse than LU's own bound for b = 5.
@@ -83,7 +85,6 @@ class BandedMatrix:
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """K @ x for x of shape (n,) or (n, m) (from the lower band: K is symmetric)."""
-        from .kernels import band_matvec
         x = np.asarray(x, dtype=float)
         return band_matvec(self._lower, np.ascontiguousarray(x.reshape(x.shape[0], -1))).reshape(x.shape)
 
@@ -94,7 +95,6 @@ class BandedMatrix:
     def lu(self):
         """A factorisation for solves, with the inertia: :class:`BandedLDLT` where it is stable
         (no zero pivot, growth at most :data:`LDLT_GROWTH_LIMIT`), else :meth:`pivoted_lu`."""
-        from .kernels import band_ldlt                  # numba: compiled (or loaded) on first use
         F, negative, zero, growth = band_ldlt(self.lower(), self.b)
         if zero == 0 and growth <= LDLT_GROWTH_LIMIT:
             return BandedLDLT(F, negative)
@@ -125,7 +125,6 @@ class BandedMatrix:
         """Number of negative eigenvalues (the inertia index), from the pivot signs of a band
         LDL^T factorisation (Sylvester): O(n b^2). ``known`` is accepted for compatibility and ignored.
         """
-        from .kernels import band_ldlt                  # numba: compiled (or loaded) on first use
         return int(band_ldlt(self.lower(), self.b)[1])
 
 
@@ -140,7 +139,6 @@ class BandedLDLT:
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve K x = rhs for rhs of shape (n,) or (n, k)."""
-        from .kernels import band_ldlt_solve
         x = np.array(rhs, dtype=float, order="C")
         band_ldlt_solve(self._F, x.reshape(x.shape[0], -1))
         return x
@@ -252,7 +250,6 @@ def eigenvalues_near_zero(M, k: int, start: np.ndarray | None = None, lu=None, t
     vectors : ndarray (n, k)
     subspace : ndarray (n, k + 4), only if ``subspace``: the last iterate, to warm-start the next state
     """
-    from .kernels import orthonormal, ritz_step
     n = M.n
     k = min(k, n)
     m = min(n, k + 4)

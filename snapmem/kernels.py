@@ -420,3 +420,13 @@ def volume_gradient(q, edges, n_dof):
         g[2 * b] += c * (ra + 2.0 * rb) * dz
         g[2 * b + 1] += s
     return g
+
+
+@njit(cache=True, nogil=True)
+def radius_max_step(q, dq, n_node_dofs, fraction):
+    """Largest alpha <= 1 with every positive radius r_i + alpha dr_i above (1 - fraction) r_i."""
+    alpha = 1.0
+    for i in range(0, n_node_dofs, 2):
+        if dq[i] < 0.0 and q[i] > 0.0:
+            alpha = min(alpha, fraction * q[i] / -dq[i])
+    return alpha

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels import edge_kinematics
 from .meridian import Meridian
 
 
@@ -52,7 +53,6 @@ class EdgeKinematics:
         inv_length = meridian.inverse_length
         inv_mid_radius = meridian.inverse_mid_radius
         if compiled and q.dtype == np.float64 and q.ndim == 1:
-            from .kernels import edge_kinematics            # the same arithmetic in one pass
             return cls(*edge_kinematics(q, meridian.edges, inv_length, inv_mid_radius), inv_length, inv_mid_radius)
         a, b = meridian.edges[:, 0], meridian.edges[:, 1]
         r, z = q[0::2], q[1::2]

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SnapmemError, check_real
+from .kernels import invariant_chain, linear_law_density
 
 
 #: Use the compiled chain rule (snapmem.kernels.invariant_chain) for 1D float arrays; False
@@ -86,7 +87,6 @@ class InvariantLaw(Law):
 
     def density(self, lam1, lam2) -> Density:
         if compiled_chain and self.linear and _compilable(lam1, lam2):
-            from .kernels import linear_law_density       # W = W1 (I1 - 3) + W2 (I2 - 3), one pass
             _, W1, W2, _, _, _ = self.invariant_derivatives(3.0, 3.0)
             return Density(*linear_law_density(lam1, lam2, float(W1), float(W2)))
         a2, b2 = lam1 * lam1, lam2 * lam2
@@ -95,7 +95,6 @@ class InvariantLaw(Law):
         I2 = 1.0 / a2 + 1.0 / b2 + a2 * b2
         W, W1, W2, W11, W12, W22 = self.invariant_derivatives(I1, I2)
         if compiled_chain and _compilable(lam1, lam2):
-            from .kernels import invariant_chain          # the chain rule below, in one pass
             w1, w2, w11, w12, w22 = invariant_chain(lam1, lam2, *(_full(x, lam1) for x in (W1, W2, W11, W12, W22)))
             return Density(W, w1, w2, w11, w12, w22)
         # first and second derivatives of the invariants in (lam1, lam2)

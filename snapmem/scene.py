@@ -20,8 +20,8 @@ import numpy as np
 
 from .banded import BandedMatrix
 from .bordered import BodyMatrix
-from .kernels import scatter_add, state_check, volume_gradient
 from .errors import SnapmemError, check_real
+from .kernels import edge_assembly, radius_max_step, scatter_add, state_check, volume_gradient
 from .kinematics import EdgeKinematics
 from .materials import Density
 from .meridian import Meridian
@@ -297,7 +297,6 @@ class Scene:
 
     def _membrane_compiled(self, q, kin, dens, loads, order):
         """As :meth:`_membrane`, by the compiled kernel (snapmem.kernels.edge_assembly)."""
-        from .kernels import edge_assembly                 # numba: compiled on first use, cached on disk
         pressure = loads["pressure"] if self.edge_terms else 0.0
         m = self.meridian
         gradient, band, volume, force = edge_assembly(
@@ -413,11 +412,9 @@ class Scene:
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """Largest step fraction alpha <= 1 keeping free radii positive (fraction to boundary 0.9)
         and every term's state admissible (no node crossing a contact gap of zero)."""
-        r, dr = q[: self.n_node_dofs: 2], dq[: self.n_node_dofs: 2]
-        shrinking = (dr < 0) & (r > 0)
-        alpha = 1.0
-        if np.any(shrinking):
-            alpha = float(min(1.0, 0.9 * np.min(r[shrinking] / -dr[shrinking])))
+        alpha = radius_max_step(q, dq, self.n_node_dofs, 0.9)
+        if not self.node_terms:
+            return alpha
         x, dx = self.node_coordinates(q), self.node_coordinates(dq)
         for term, s in zip(self.node_terms, self._body_slices):
             alpha = min(alpha, term.max_step(x, q[s], dx, dq[s]))
