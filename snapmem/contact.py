@@ -102,7 +102,7 @@ class Contact(NodeTerm):
 
     def node_local(self, x, y, area, loads, order):
         idx = self._node_index(x.shape[0])
-        if self.linear is not None:
+        if self.linear is not None:                # rod, shell, plane: no bodies, one compiled pass
             axis, sign, offset = self.linear
             energy, near, grad, hess = linear_barrier(x, idx, axis, sign, offset, self._coef(area), self.dhat, order)
             out = NodeLocal(energy, nodes=near)
@@ -116,8 +116,7 @@ class Contact(NodeTerm):
         idx = idx[near]
         out = NodeLocal(self.body_energy(y), nodes=idx)
         out.body_gradient, out.body_hessian = self.body_energy_derivatives(y, order)
-        if idx.size == 0:
-            out.nodes = None                       # nothing near: no node parts at all
+        if idx.size == 0:                          # nothing near: no node parts at all
             return out
         d, dg, dh = self.gap(x[idx], y, order)
         c = self.kappa * area[idx] / self.dhat
@@ -389,9 +388,6 @@ class Ball(Contact):
     def admissible(self, x, y):
         if self.meridian is None:
             return super().admissible(x, y)
-        zero = np.zeros_like(x)
-        if ball_min_gap(x, zero, 0.0, self.meridian.edges, self._centre(y), 0.0, self.radius) > 0:
-            return None
         d = self.gaps(x, y)
         if np.any(d <= 0):
             i = int(np.argmin(d))
