@@ -303,8 +303,6 @@ class Scene:
             q, m.edges, kin.inv_length, kin.inv_mid_radius, self.weight, dens.w1, dens.w2, dens.w11, dens.w12,
             dens.w22, pressure, self._hess_index, self._band_size, order)
         energy = float(self.weight @ dens.w) - pressure * volume
-        if gradient.size < q.size:                         # the bodies' heights, after the nodes
-            gradient = np.concatenate([gradient, np.zeros(q.size - gradient.size)])
         return energy, gradient, (_Band(band) if order >= 2 else None), 64.0 * np.finfo(float).eps * m.nodes * force
 
     def _empty_band(self, order):
