@@ -117,9 +117,8 @@ class Scene:
             self.loads[key] = check_real(key, value)
         self.weight = 2.0 * np.pi * meridian.mid_radius * meridian.length * self.thickness  # dV_bar (E,)
         self._build_dof_map()
-        self._free_radius = np.ones(meridian.nodes, dtype=bool)          # nodes whose radius may move
-        self._free_radius[[d // 2 for d in self.fixed if d % 2 == 0 and d < 2 * meridian.nodes]] = False
-        self._free_radius_dofs = 2 * np.flatnonzero(self._free_radius)
+        fixed_r = {d for d in self.fixed if d % 2 == 0 and d < 2 * meridian.nodes}
+        self._free_radius_dofs = np.array([d for d in range(0, 2 * meridian.nodes, 2) if d not in fixed_r], dtype=int)
         self._domain_terms = [t for t in self.density_terms if t.restricts_domain]
 
     # ----------------------------------------------------------------------------------------
