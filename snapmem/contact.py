@@ -418,24 +418,29 @@ _HC = _JU.T @ _M @ _JW + _JW.T @ _M.T @ _JU
 
 def contact_terms(scene) -> list:
     """The contact terms of a scene, in order."""
-    return [t for t in scene.terms if isinstance(t, Contact)]
+    return [t for t in scene.node_terms if isinstance(t, Contact)]
+
+
+def contact_names(scene) -> list:
+    """Output name of every contact term of the scene, in order: the body's class name in lower
+    case (``rod``, ``shell``, ``plane``, ``ball``), numbered if a scene has two of a kind."""
+    names, seen = [], {}
+    for term in contact_terms(scene):
+        name = type(term).__name__.lower()
+        seen[name] = seen.get(name, 0) + 1
+        names.append(name if seen[name] == 1 else f"{name}{seen[name]}")
+    return names
 
 
 def contact_report(scene, q: np.ndarray) -> dict:
     """Total normal force [N] and smallest gap [m] of every contact term of the scene at q.
 
-    Keys are ``<name>_force`` and ``<name>_gap`` with name the body's class name in lower case
-    (``rod``, ``shell``, ``plane``, ``ball``), numbered if a scene has two of a kind.
+    Keys are ``<name>_force`` and ``<name>_gap`` (names: :func:`contact_names`).
     """
-    x, ys = scene.node_coordinates(q), scene.body_coordinates(q)
-    out, seen = {}, {}
-    for term, y in zip(scene.node_terms, ys):
-        if not isinstance(term, Contact):
-            continue
-        name = type(term).__name__.lower()
-        seen[name] = seen.get(name, 0) + 1
-        if seen[name] > 1:
-            name = f"{name}{seen[name]}"
+    x = scene.node_coordinates(q)
+    out = {}
+    terms = [(t, y) for t, y in zip(scene.node_terms, scene.body_coordinates(q)) if isinstance(t, Contact)]
+    for name, (term, y) in zip(contact_names(scene), terms):
         out[f"{name}_force"] = float(term.forces(x, y, scene.node_area).sum())
         out[f"{name}_gap"] = float(term.gaps(x, y).min())
     return out

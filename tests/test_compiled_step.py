@@ -1,0 +1,160 @@
+"""The compiled time step (snapmem.compiled_step) against the general path it replaces: the same
+incremental potential, residual and tangent as Scene.evaluate plus inertia, the same Newton
+iterates, the same recorded frames, and the general path wherever a term is not covered."""
+
+import numpy as np
+import pytest
+
+import snapmem.compiled_step as compiled_step
+from snapmem.banded import BandedMatrix
+from snapmem.bordered import BodyMatrix
+from snapmem.compiled_step import CompiledStep, bordered_solve
+from snapmem.contact import contact_report
+from snapmem.dynamics import _Stepper, lumped_masses, simulate
+from snapmem.robots import events, experiment
+
+# (scene, parameters, time at which its loads are taken): ball with a body and a plate, rod with
+# electric, shell, a torus without contact
+CASES = [("ball_throw", {"voltage": 400.0}, 1.0), ("ball_drop", {}, 0.0), ("gripper_rod", {"voltage": 1000.0}, 20.0),
+         ("gripper_shell", {}, 20.0), ("torus_snap", {}, 1.0)]
+
+
+def perturbed(ex, scale=1e-4, seed=0):
+    s = ex.scene
+    q = ex.q0.copy() if ex.q0 is not None else s.reference_state()
+    rng = np.random.default_rng(seed)
+    q[s.free[: s.n_band]] += scale * s.meridian.size * rng.standard_normal(s.n_band)
+    return q
+
+
+@pytest.mark.parametrize("name, params, t", CASES)
+def test_assembly_is_the_scenes_plus_inertia(name, params, t):
+    ex = experiment(name, **params)
+    s = ex.scene
+    step = CompiledStep.of(s)
+    assert step is not None
+    loads = s.resolve_loads(ex.loads(t))
+    q = perturbed(ex)
+    assert s.inadmissible(q) is None
+    rng = np.random.default_rng(1)
+    nf = s.free.size
+    inertia, momentum = rng.random(nf) * 1e3, rng.standard_normal(nf)
+    anchor = q + 1e-5 * rng.standard_normal(q.size)
+    energy, residual, lower, border, corner, floor = step.assemble(q, loads, inertia, anchor, momentum)
+    ev = s.evaluate(q, loads, 2)
+    d = (q - anchor)[s.free]
+    assert energy == pytest.approx(ev.energy + 0.5 * d @ (inertia * d) - momentum @ d, rel=1e-13, abs=1e-15)
+    expected = ev.residual + inertia * d - momentum
+    assert np.max(np.abs(residual - expected)) <= 1e-13 * np.max(np.abs(expected))
+    K = ev.stiffness
+    K.add_diagonal(inertia)
+    mine = BandedMatrix.from_lower(np.ascontiguousarray(lower), s.bandwidth)
+    if s.bodies:
+        mine = BodyMatrix(mine, border.T, corner)
+    dense = K.to_dense()
+    assert np.max(np.abs(mine.to_dense() - dense)) <= 1e-13 * np.max(np.abs(dense))
+    assert floor == ev.residual_floor
+
+
+@pytest.mark.parametrize("name, params, t", CASES)
+def test_frame_measures_are_the_scenes(name, params, t):
+    ex = experiment(name, **params)
+    s = ex.scene
+    loads = s.resolve_loads(ex.loads(t))
+    q = perturbed(ex, 1e-6)
+    energy, volume, report = CompiledStep.of(s).measures(q, loads)
+    assert energy == pytest.approx(s.energy(q, loads), rel=1e-12)
+    assert volume == pytest.approx(s.volume(q), rel=1e-13)
+    expected = contact_report(s, q)
+    assert report.keys() == expected.keys()
+    for key, value in expected.items():
+        assert report[key] == pytest.approx(value, rel=1e-12, abs=1e-300), key
+
+
+@pytest.mark.parametrize("k", [0, 1, 2])
+def test_bordered_solve_against_dense(k):
+    rng = np.random.default_rng(k)
+    n, b = 40, 3
+    A = np.zeros((n, n))
+    for d in range(b + 1):
+        v = rng.standard_normal(n - d)
+        A += np.diag(v, -d) + (np.diag(v, d) if d else 0)
+    A += 10 * np.eye(n)                                  # positive definite band
+    lower = np.zeros((b + 1, n))
+    for d in range(b + 1):
+        lower[d, : n - d] = np.diagonal(A, -d)
+    border = rng.standard_normal((k, n))
+    corner = rng.standard_normal((k, k))
+    corner = corner + corner.T - 50 * np.eye(k)           # an indefinite whole: the Schur is negative
+    M = np.block([[A, border.T], [border, corner]])
+    rhs = rng.standard_normal(n + k)
+    x, ok = bordered_solve(np.asfortranarray(lower), border, corner, rhs)
+    assert ok
+    assert np.max(np.abs(x - np.linalg.solve(M, rhs))) <= 1e-12 * np.max(np.abs(x))
+
+
+def test_bordered_solve_hands_back_what_ldlt_cannot_take():
+    n, b = 6, 1
+    lower = np.zeros((b + 1, n))
+    lower[0] = [1e-12, 1.0, 1.0, 1.0, 1.0, 1.0]          # a tiny pivot before a large coupling: growth
+    lower[1, :-1] = 1.0
+    _, ok = bordered_solve(lower, np.zeros((0, n)), np.zeros((0, 0)), np.ones(n))
+    assert not ok
+    lower[0, 0] = 2.0
+    border, corner = np.zeros((1, n)), np.zeros((1, 1))   # singular: a body coupled to nothing, no mass
+    _, ok = bordered_solve(lower, border, corner, np.ones(n + 1))
+    assert not ok
+
+
+def test_newton_solve_matches_the_general_path():
+    """One time step from a perturbed state, with the inertia of a 1 ms step: same y, iterations, cuts."""
+    ex = experiment("ball_throw", voltage=400.0)
+    s = ex.scene
+    loads = s.resolve_loads(ex.loads(1.0))
+    q = perturbed(ex, 1e-4, seed=3)
+    mass = lumped_masses(s, ex.rho)
+    damping = ex.damping * mass
+    v = np.zeros_like(q)
+    v[s.free[: s.n_band]] = 0.05 * np.random.default_rng(4).standard_normal(s.n_band)
+    results = []
+    for enabled in (True, False):
+        compiled_step.enabled = enabled
+        try:
+            stepper = _Stepper(s, mass, damping, ex.options)
+            assert (stepper.compiled is not None) == enabled
+            results.append(stepper.solve(q, v, 1e-3, loads))
+        finally:
+            compiled_step.enabled = True
+    (y_c, rep_c), (y_p, rep_p) = results
+    assert rep_c.converged and rep_p.converged
+    assert rep_c.iterations == rep_p.iterations >= 3
+    assert rep_c.step_cuts == rep_p.step_cuts
+    assert np.max(np.abs(y_c - y_p)) <= 1e-12 * s.meridian.size
+
+
+def test_simulation_matches_the_general_path():
+    ex = experiment("ball_throw")
+    runs = []
+    for enabled in (True, False):
+        compiled_step.enabled = enabled
+        try:
+            runs.append(simulate(ex.scene, ex.loads, 1.7, rho=ex.rho, damping=ex.damping, q0=ex.q0,
+                                 options=ex.options, damp_bodies=ex.damp_bodies))
+        finally:
+            compiled_step.enabled = True
+    fast, general = runs
+    assert fast.meta["newton_iterations"] == general.meta["newton_iterations"]
+    assert fast.data.keys() == general.data.keys()
+    for key in ("q", "potential", "ball_force", "plane_gap", "min_gap"):
+        assert np.max(np.abs(fast[key] - general[key])) <= 1e-8 * np.max(np.abs(general[key])), key
+    ev_f, ev_g = events(fast), events(general)
+    assert ev_f["snap"] == pytest.approx(ev_g["snap"], rel=1e-9)
+
+
+def test_uncovered_terms_take_the_general_path():
+    assert CompiledStep.of(experiment("pump").scene) is None          # Gent: a law with a lock
+    compiled_step.enabled = False
+    try:
+        assert CompiledStep.of(experiment("ball_drop").scene) is None
+    finally:
+        compiled_step.enabled = True
