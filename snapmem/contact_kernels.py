@@ -69,9 +69,22 @@ def _node_gap(pr, pz, radius, body, g, h, off, order):
 
 
 @njit(cache=True, nogil=True)
-def _segment_gap(ar, az, ur, uz, wr, wz, radius, body, g, h, order):
+def _bilinear_hessian(i, j):
+    """Entry (i, j) of the constant Hessian of C = r_b zc - r_b z_a - r_a zc + r_a z_b in
+    (r_a, z_a, r_b, z_b, zc)."""
+    a, b = min(i, j), max(i, j)
+    if (a == 0 and b == 3) or (a == 2 and b == 4):
+        return 1.0
+    if (a == 1 and b == 2) or (a == 0 and b == 4):
+        return -1.0
+    return 0.0
+
+
+@njit(cache=True, nogil=True)
+def _segment_gap(ar, az, ur, uz, wr, wz, radius, body, g, h, order, gC, gL):
     """Gap |C| / L - radius of the centre to the line of an edge, C = u x w, L = |u|, with its
-    derivatives in (r_a, z_a, r_b, z_b[, zc]) into g, h (u = b - a, w = c - a)."""
+    derivatives in (r_a, z_a, r_b, z_b[, zc]) into g, h (u = b - a, w = c - a); gC, gL are work
+    arrays of g's size (no allocation per edge: the profile of ball_drop showed it)."""
     C = ur * wz - uz * wr
     L = np.sqrt(ur * ur + uz * uz)
     sgn = 1.0 if C >= 0 else -1.0
@@ -80,35 +93,26 @@ def _segment_gap(ar, az, ur, uz, wr, wz, radius, body, g, h, order):
         return d
     n = g.size
     # dC and dL in (r_a, z_a, r_b, z_b, zc)
-    gC = np.empty(n)
     gC[0], gC[1], gC[2], gC[3] = uz - wz, wr - ur, wz, -wr
     hr, hz = ur / L, uz / L
-    gL = np.zeros(n)
     gL[0], gL[1], gL[2], gL[3] = -hr, -hz, hr, hz
     if body:
         gC[4] = ur
+        gL[4] = 0.0
     for i in range(n):
         g[i] = sgn * (gC[i] / L - C / (L * L) * gL[i])
     if order < 2:
         return d
-    # C is bilinear: its Hessian is constant (HC below); L's Hessian is P / L on the u block
-    HC = np.zeros((n, n))
-    HC[0, 3], HC[1, 2] = 1.0, -1.0          # C = r_b zc - r_b z_a - r_a zc + r_a z_b
-    if body:
-        HC[0, 4], HC[2, 4] = -1.0, 1.0
-    for i in range(n):
-        for j in range(i):
-            HC[i, j] = HC[j, i]
+    # C is bilinear: its Hessian is constant; L's Hessian is P / L on the u block
     Prr, Prz, Pzz = (1.0 - hr * hr) / L, -hr * hz / L, (1.0 - hz * hz) / L
-    P = np.array([[Prr, Prz], [Prz, Pzz]])
     for i in range(n):
         for j in range(n):
             HL = 0.0
             if i < 4 and j < 4:
                 si = -1.0 if i < 2 else 1.0
                 sj = -1.0 if j < 2 else 1.0
-                HL = si * sj * P[i % 2, j % 2]
-            h[i, j] = sgn * (HC[i, j] / L - (gC[i] * gL[j] + gL[i] * gC[j]) / (L * L)
+                HL = si * sj * (Prr if i % 2 == 0 and j % 2 == 0 else (Pzz if i % 2 == 1 and j % 2 == 1 else Prz))
+            h[i, j] = sgn * (_bilinear_hessian(i, j) / L - (gC[i] * gL[j] + gL[i] * gC[j]) / (L * L)
                              - C / (L * L) * HL + 2.0 * C / (L * L * L) * gL[i] * gL[j])
     return d
 
@@ -146,6 +150,7 @@ def ball_edge_barrier(x, edges, zc, radius, dhat, coef, body, order):
     hess = np.zeros((n, n, count))
     g = np.zeros(n)
     h = np.zeros((n, n))
+    gC, gL = np.empty(n), np.empty(n)
     energy = 0.0
     for k in range(count):
         e = which[k]
@@ -160,7 +165,7 @@ def ball_edge_barrier(x, edges, zc, radius, dhat, coef, body, order):
         elif t >= 1.0:
             d = _node_gap(br, bz - zc, radius, body, g, h, 2, order)
         else:
-            d = _segment_gap(ar, az, ur, uz, wr, wz, radius, body, g, h, order)
+            d = _segment_gap(ar, az, ur, uz, wr, wz, radius, body, g, h, order, gC, gL)
         if d <= 0.0:
             return np.inf, which, grad, hess
         lg = np.log(d / dhat)

@@ -62,6 +62,7 @@ from .threads import single_threaded
 log = logging.getLogger(__name__)
 
 SCHEMES = ("midpoint", "bdf2", "euler")
+EPS = float(np.finfo(float).eps)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -268,6 +269,8 @@ class _Stepper:
         self.scene, self.mass, self.damping, self.options = scene, mass, damping, options
         self.free = scene.free
         self.tol = options.newton.tol * scene.force_scale
+        self._mass_free, self._damping_free = mass[self.free], damping[self.free]
+        self._size = scene.meridian.size
         # the whole Newton solve in one compiled call where the scene's terms allow it
         self.compiled = (CompiledStep.of(scene) if scene.compiled and options.line_search == "energy" else None)
 
@@ -278,9 +281,8 @@ class _Stepper:
         acceleration; y - q - h v = h^2 a_new exactly) if it is admissible, else from ``current``
         (the present state, always admissible; default q)."""
         scene, free = self.scene, self.free
-        coef = self.mass / h ** 2 + self.damping / h
-        inertia_free = coef[free]
-        momentum = (self.mass * v / h)[free]
+        inertia_free = self._mass_free / h ** 2 + self._damping_free / h
+        momentum = self._mass_free * v[free] / h
 
         def assemble(y):
             ev = scene.evaluate(y, loads, order=2)
@@ -293,7 +295,7 @@ class _Stepper:
 
         guess = q + h * v if accel is None else q + h * v + (h * h) * accel
         # the inertia term's rounding floor, eps |q| M / h^2, grows as h falls: keep the tolerance above it
-        tol = max(self.tol, 1e3 * np.finfo(float).eps * float(np.max(inertia_free)) * self.scene.meridian.size)
+        tol = max(self.tol, 1e3 * EPS * float(inertia_free.max()) * self._size)
         if self.compiled is not None:
             done = self.compiled.solve(q, guess, q if current is None else current, loads, inertia_free, momentum, tol,
                                        self.options.newton)
@@ -359,8 +361,12 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     stepper = _Stepper(scene, mass, c, options)
     free = scene.free
 
-    def loads_at(t):
-        return scene.resolve_loads(at(t))
+    last_loads = [None, None]
+
+    def loads_at(t):                     # a step asks for the loads at its end twice (solve, record)
+        if last_loads[0] != t:
+            last_loads[:] = t, scene.resolve_loads(at(t))
+        return last_loads[1]
 
     def acceleration(q, v, t):
         a = np.zeros_like(q)
@@ -443,8 +449,8 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 a_new = (v_new - v_hat) / h
             c_err = 2.0 / 9.0 if bdf2 else 1.0 / 6.0
             est = (c_err * dt * dt) * np.abs(a_new - a_prev) if order == 2 else (dt * dt / 2.0) * np.abs(a_new)
-            size = max(length, float(np.max(np.abs(q_new[: scene.n_node_dofs]))))     # grows with the membrane
-            err = float(np.max(est[free])) / (options.tol * size)
+            size = max(length, float(np.abs(q_new[: scene.n_node_dofs]).max()))     # grows with the membrane
+            err = float(est[free].max()) / (options.tol * size)
             if err > 1.0 and dt > options.dt_min:
                 rejected += 1
                 dt = max(options.dt_min, dt * max(0.2, 0.9 * err ** (-1.0 / (order + 1))))
@@ -507,21 +513,23 @@ class _Recorder:
         return min(gaps)
 
     def _measures(self, q, loads):
+        """(potential energy, volume, contact report, smallest gap) at q."""
         from .contact import contact_report
         if self.compiled is not None:
             return self.compiled.measures(q, loads)
-        return self.scene.energy(q, loads), self.scene.volume(q), contact_report(self.scene, q)
+        return self.scene.energy(q, loads), self.scene.volume(q), contact_report(self.scene, q), self._gap(q)
 
     def record(self, t, q, v, loads, dt, iterations, force=False):
-        self.min_gap = min(self.min_gap, self._gap(q))
         if not force and t - self.last_t < self.interval:
+            self.min_gap = min(self.min_gap, self._gap(q))
             return
         if self.rows and self.rows[-1]["t"] == t:
             self.rows.pop()
         scene = self.scene
         x = scene.node_coordinates(q)
         kinetic = 0.5 * float(self.mass @ (v * v))
-        potential, volume, contacts = self._measures(q, loads)
+        potential, volume, contacts, gap = self._measures(q, loads)
+        self.min_gap = min(self.min_gap, gap)
         row = {"t": t, "q": q.copy(), "r": x[:, 0].copy(), "z": x[:, 1].copy(), "v": v.copy(),
                "volume": volume, "kinetic": kinetic, "potential": potential,
                "total": kinetic + potential, "dt": dt, "newton": iterations, "min_gap": self.min_gap}

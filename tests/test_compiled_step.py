@@ -62,13 +62,15 @@ def test_frame_measures_are_the_scenes(name, params, t):
     s = ex.scene
     loads = s.resolve_loads(ex.loads(t))
     q = perturbed(ex, 1e-6)
-    energy, volume, report = CompiledStep.of(s).measures(q, loads)
+    energy, volume, report, gap = CompiledStep.of(s).measures(q, loads)
     assert energy == pytest.approx(s.energy(q, loads), rel=1e-12)
     assert volume == pytest.approx(s.volume(q), rel=1e-13)
     expected = contact_report(s, q)
     assert report.keys() == expected.keys()
     for key, value in expected.items():
         assert report[key] == pytest.approx(value, rel=1e-12, abs=1e-300), key
+    gaps = [value for key, value in expected.items() if key.endswith("_gap")]
+    assert gap == (min(gaps) if gaps else np.inf)
 
 
 @pytest.mark.parametrize("k", [0, 1, 2])
