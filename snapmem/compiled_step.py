@@ -6,13 +6,13 @@ its node terms, ``snapmem.newton.newton``, the bordered solve, the domain checks
 more per iteration in Python calls around it. The profile of ``ball_drop`` showed that glue as
 the whole cost. Here the same arithmetic runs in one numba kernel per time step, built from the
 same building blocks (``snapmem.kernels``, ``snapmem.contact_kernels``): edge kinematics, the
-linear-invariant law's density, the fused membrane assembly, the contact barriers, the band
+law's density, the fused membrane assembly, the contact barriers, the band
 LDL^T with the bodies' Schur complement and one refinement step, and Newton's line search on the
 step's incremental potential exactly as ``newton(..., merit='energy')`` does it.
 
 What it covers (:meth:`CompiledStep.of` returns None otherwise, and the general path runs):
 
-* the stretching term of a law linear in the invariants (neo-Hookean, Mooney-Rivlin), the
+* the stretching term of a law in :data:`LAW_KINDS` (neo-Hookean, Mooney-Rivlin, Gent), the
   electric term, the pressure work;
 * contact barriers with a linear gap (rod, shell, plane) and balls in edge mode (with or without
   a body of their own);
@@ -38,9 +38,9 @@ from .contact import FRACTION_TO_BOUNDARY, Ball, Contact, contact_names
 from .contact_kernels import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step, linear_barrier,
                               linear_max_step, linear_min_gap)
 from .kernels import (_ldlt_solve_vector, band_ldlt, band_ldlt_solve, band_matvec, edge_assembly, edge_stretches,
-                      linear_law_density, radius_max_step, state_check)
+                      invariant_chain, linear_law_density, radius_max_step, state_check)
 from .banded import LDLT_GROWTH_LIMIT
-from .materials import InvariantLaw
+from .materials import Gent, InvariantLaw
 from .newton import NewtonReport
 from .terms import Electric, PressureWork, Stretching
 
@@ -55,9 +55,26 @@ REASONS = ("converged", "max iterations", "line search failed: no step lowers th
 #: Status of a step handed back to the general path (an LDL^T it cannot trust).
 HANDED_BACK = -1
 
+#: Laws the kernel evaluates itself: class -> (kind, parameters). A law not here (Yeoh, a new
+#: one) runs the general path; adding it is one entry and one branch of :func:`_law_density`.
+LINEAR, GENT = 0, 1
+LAW_KINDS = {
+    "linear": lambda law: (LINEAR, law.invariant_derivatives(3.0, 3.0)[1:3]),   # W1 (I1 - 3) + W2 (I2 - 3)
+    Gent: lambda law: (GENT, (law.mu, law.Jlim)),
+}
+
+
+def _law_kind(law):
+    """(kind, parameters) of a law the kernel covers, else None."""
+    if isinstance(law, InvariantLaw) and law.linear:
+        return LAW_KINDS["linear"](law)
+    make = LAW_KINDS.get(type(law))
+    return None if make is None else make(law)
+
+
 # Everything the kernel needs of a scene, packed once (numba takes named tuples of arrays).
 Plan = namedtuple("Plan", [
-    "edges", "inv_length", "inv_mid_radius", "weight", "W1", "W2",         # membrane, law W1 (I1-3) + W2 (I2-3)
+    "edges", "inv_length", "inv_mid_radius", "weight", "law", "law_params",   # membrane; law: LAW_KINDS
     "hess_index", "band_size", "n_band", "bandwidth", "free", "radius_dofs", "n_node_dofs", "n_bodies",
     "edge_dofs", "edge_pos", "node_hess",                                 # scatter maps of node and edge terms
     "lin_nodes", "lin_ptr", "lin_axis", "lin_sign", "lin_offset", "lin_dhat", "lin_coef",   # rod, shell, plane
@@ -86,8 +103,8 @@ class CompiledStep:
             return None
         laws = [t for t in scene.density_terms if isinstance(t, Stretching)]
         electric = [t for t in scene.density_terms if type(t) is Electric]
-        if (len(laws) != 1 or len(laws) + len(electric) != len(scene.density_terms)
-                or not isinstance(laws[0].law, InvariantLaw) or not laws[0].law.linear or scene._domain_terms):
+        law = _law_kind(laws[0].law) if len(laws) == 1 else None
+        if law is None or len(laws) + len(electric) != len(scene.density_terms):
             return None
         if not all(type(t) is PressureWork for t in scene.edge_terms) or len(scene.edge_terms) > 1:
             return None
@@ -103,12 +120,11 @@ class CompiledStep:
                 balls.append((term, s))
             else:
                 return None
-        _, W1, W2, _, _, _ = laws[0].law.invariant_derivatives(3.0, 3.0)
         lin_nodes = [t._node_index(n_nodes) for t in linear]
         plan = Plan(
             edges=np.ascontiguousarray(m.edges, dtype=np.int64),
             inv_length=m.inverse_length, inv_mid_radius=m.inverse_mid_radius, weight=scene.weight,
-            W1=float(W1), W2=float(W2),
+            law=law[0], law_params=np.array(law[1], dtype=float),
             hess_index=np.ascontiguousarray(scene._hess_index, dtype=np.int64), band_size=int(scene._band_size),
             n_band=int(scene.n_band), bandwidth=int(scene.bandwidth),
             free=np.ascontiguousarray(scene.free, dtype=np.int64),
@@ -183,6 +199,24 @@ class CompiledStep:
 # ----------------------------------------------------------------------------------------------
 # kernels
 @njit(cache=True, nogil=True)
+def _law_density(lam1, lam2, kind, params):
+    """The law's (w, w1, w2, w11, w12, w22), each (E,): snapmem.materials' laws (which document them)."""
+    if kind == LINEAR:
+        return linear_law_density(lam1, lam2, params[0], params[1])
+    mu, jlim = params[0], params[1]                     # Gent: W = -(mu Jlim / 2) ln(1 - (I1 - 3) / Jlim)
+    n = lam1.size
+    w, W1, W11, zero = np.empty(n), np.empty(n), np.empty(n), np.zeros(n)
+    for e in range(n):
+        a2, b2 = lam1[e] * lam1[e], lam2[e] * lam2[e]
+        s = 1.0 - (a2 + b2 + 1.0 / (a2 * b2) - 3.0) / jlim
+        w[e] = -0.5 * mu * jlim * np.log(s)
+        W1[e] = 0.5 * mu / s
+        W11[e] = W1[e] / (s * jlim)
+    w1, w2, w11, w12, w22 = invariant_chain(lam1, lam2, W1, zero, W11, zero, zero)
+    return w, w1, w2, w11, w12, w22
+
+
+@njit(cache=True, nogil=True)
 def assemble(q, P, pressure, a_el, inertia, anchor, momentum, order):
     """The step's incremental potential Pi(q) + (1/2) d^T diag(inertia) d - momentum . d, d = (q -
     anchor) on the free degrees of freedom: (energy, residual, lower, border, corner, floor); the
@@ -191,7 +225,7 @@ def assemble(q, P, pressure, a_el, inertia, anchor, momentum, order):
     The same terms as ``Scene.evaluate`` (which documents them) for the covered term types.
     """
     lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
-    w, w1, w2, w11, w12, w22 = linear_law_density(lam1, lam2, P.W1, P.W2)
+    w, w1, w2, w11, w12, w22 = _law_density(lam1, lam2, P.law, P.law_params)
     if a_el != 0.0:                       # -a lam1^2 lam2^2 (snapmem.terms.Electric)
         for e in range(w.size):
             l1, l2 = lam1[e], lam2[e]
@@ -377,13 +411,20 @@ def contact_gaps(q, P):
 
 @njit(cache=True, nogil=True)
 def _state_ok(q, P):
-    """q finite, free radii positive, no edge collapsed: the domain apart from the contacts."""
+    """q finite, free radii positive, no edge collapsed, inside the law's domain (Gent's lock):
+    the domain apart from the contacts."""
     if state_check(q, P.radius_dofs) != -1:
         return False
     for e in range(P.edges.shape[0]):
         a, b = P.edges[e, 0], P.edges[e, 1]
         if q[2 * a] == q[2 * b] and q[2 * a + 1] == q[2 * b + 1]:
             return False
+    if P.law == GENT:
+        lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
+        for e in range(lam1.size):
+            a2, b2 = lam1[e] * lam1[e], lam2[e] * lam2[e]
+            if not (lam1[e] > 0.0 and lam2[e] > 0.0 and a2 + b2 + 1.0 / (a2 * b2) - 3.0 < P.law_params[1]):
+                return False
     return True
 
 
@@ -468,9 +509,12 @@ def step_newton(guess, fallback, anchor, P, pressure, a_el, inertia, momentum, t
     """Damped Newton on the step's incremental potential: snapmem.newton.newton with merit='energy'
     (which documents every rule here), in one call. Returns (y, status, iterations, cuts, norm),
     status an index into REASONS, or HANDED_BACK."""
-    q = guess.copy() if admissible(guess, P) else fallback.copy()
-    if not admissible(q, P):
-        return q, 6, 0, 0, np.nan
+    if admissible(guess, P):
+        q = guess.copy()
+    else:
+        q = fallback.copy()
+        if not admissible(q, P):
+            return q, 6, 0, 0, np.nan
     energy, residual, lower, border, corner, floor = assemble(q, P, pressure, a_el, inertia, anchor, momentum, 2)
     norm = _norm(residual)
     free = P.free

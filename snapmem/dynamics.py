@@ -442,15 +442,14 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 fallbacks += 1
         else:
             q_new, v_new = y, (y - q) / h
-        a_new = (v_new - v) / dt
+        a_new = (v_new - v_hat) / h if bdf2 and options.adaptive else (v_new - v) / dt
         err = 0.0
         if options.adaptive:
-            if bdf2:
-                a_new = (v_new - v_hat) / h
             c_err = 2.0 / 9.0 if bdf2 else 1.0 / 6.0
-            est = (c_err * dt * dt) * np.abs(a_new - a_prev) if order == 2 else (dt * dt / 2.0) * np.abs(a_new)
+            change = np.abs(a_new - a_prev) if order == 2 else np.abs(a_new)
+            est = (c_err if order == 2 else 0.5) * dt * dt * float(change[free].max())
             size = max(length, float(np.abs(q_new[: scene.n_node_dofs]).max()))     # grows with the membrane
-            err = float(est[free].max()) / (options.tol * size)
+            err = est / (options.tol * size)
             if err > 1.0 and dt > options.dt_min:
                 rejected += 1
                 dt = max(options.dt_min, dt * max(0.2, 0.9 * err ** (-1.0 / (order + 1))))
@@ -525,26 +524,26 @@ class _Recorder:
             return
         if self.rows and self.rows[-1]["t"] == t:
             self.rows.pop()
-        scene = self.scene
-        x = scene.node_coordinates(q)
         kinetic = 0.5 * float(self.mass @ (v * v))
         potential, volume, contacts, gap = self._measures(q, loads)
         self.min_gap = min(self.min_gap, gap)
-        row = {"t": t, "q": q.copy(), "r": x[:, 0].copy(), "z": x[:, 1].copy(), "v": v.copy(),
-               "volume": volume, "kinetic": kinetic, "potential": potential,
+        row = {"t": t, "q": q.copy(), "v": v.copy(), "volume": volume, "kinetic": kinetic, "potential": potential,
                "total": kinetic + potential, "dt": dt, "newton": iterations, "min_gap": self.min_gap}
-        row.update({f"load_{k}": val for k, val in loads.items()})
+        row.update(("load_" + k, val) for k, val in loads.items())
         row.update(contacts)
-        for i, body in enumerate(scene.bodies):
-            row[f"{body.name}_z"] = q[scene.n_node_dofs + i]
-            row[f"{body.name}_v"] = v[scene.n_node_dofs + i]
         self.rows.append(row)
         self.last_t = t
         self.min_gap = np.inf
 
     def trajectory(self, meta) -> Trajectory:
+        """The frames as arrays; node coordinates and body heights and speeds split off q and v."""
         keys = self.rows[0].keys()
         data = {k: np.array([row[k] for row in self.rows]) for k in keys}
+        n = self.scene.n_node_dofs
+        data["r"], data["z"] = data["q"][:, 0:n:2].copy(), data["q"][:, 1:n:2].copy()
+        for i, body in enumerate(self.scene.bodies):
+            data[f"{body.name}_z"] = data["q"][:, n + i].copy()
+            data[f"{body.name}_v"] = data["v"][:, n + i].copy()
         return Trajectory(data, meta)
 
 
