@@ -303,6 +303,32 @@ def assemble(q, P, pressure, a_el, inertia, anchor, momentum, order):
 
 
 @njit(cache=True, nogil=True)
+def _small_solve(S, g):
+    """S^-1 g for the bodies' small k x k Schur complement: Gaussian elimination with partial
+    pivoting (numba's np.linalg.solve costs 4 s of compilation for what is a 2 x 2 at most)."""
+    k = g.size
+    A, x = S.copy(), g.copy()
+    for c in range(k):
+        p = c
+        for i in range(c + 1, k):
+            if abs(A[i, c]) > abs(A[p, c]):
+                p = i
+        for j in range(k):
+            A[c, j], A[p, j] = A[p, j], A[c, j]
+        x[c], x[p] = x[p], x[c]
+        for i in range(c + 1, k):
+            f = A[i, c] / A[c, c]
+            for j in range(c, k):
+                A[i, j] -= f * A[c, j]
+            x[i] -= f * x[c]
+    for c in range(k - 1, -1, -1):
+        for j in range(c + 1, k):
+            x[c] -= A[c, j] * x[j]
+        x[c] /= A[c, c]
+    return x
+
+
+@njit(cache=True, nogil=True)
 def _eliminate(F, border, Z, S, rhs):
     """Block elimination of [[A, B], [B^T, C]] x = rhs with A = L D L^T (factors F), Z = A^-1 B, S the Schur."""
     nb, k = F.shape[0], border.shape[0]
@@ -315,7 +341,7 @@ def _eliminate(F, border, Z, S, rhs):
         g[a] = rhs[nb + a]
         for i in range(nb):
             g[a] -= border[a, i] * x[i]
-    mu = g / S[0, 0] if k == 1 else np.linalg.solve(S, g)
+    mu = g / S[0, 0] if k == 1 else _small_solve(S, g)
     for a in range(k):
         for i in range(nb):
             x[i] -= Z[i, a] * mu[a]
@@ -368,7 +394,7 @@ def bordered_solve(lower, border, corner, rhs):
                 return rhs, False
     if k == 1 and S[0, 0] == 0.0:
         return rhs, False
-    mu = g / S[0, 0] if k == 1 else np.linalg.solve(S, g)
+    mu = g / S[0, 0] if k == 1 else _small_solve(S, g)
     for i in range(nb):
         t = W[i, k]
         for a in range(k):
