@@ -183,13 +183,15 @@ class CompiledStep:
         gaps = contact_gaps(q, self.plan)
         return float(gaps.min()) if gaps.size else np.inf
 
-    def solve(self, anchor, guess, fallback, loads, inertia, momentum, tol, options):
-        """Newton on the step's incremental potential from ``guess`` (``fallback``, the present
-        state, if the guess is outside the domain): (y, NewtonReport), or None to hand the step
+    def solve(self, anchor, velocity, h, loads, fallback, mass, damping, tol, size, options):
+        """The time step of ``snapmem.dynamics._Stepper.solve`` (which documents it): Newton on the
+        incremental potential of step h from (anchor, velocity), with ``mass`` and ``damping`` on
+        the free degrees of freedom, from the guess anchor + h velocity (``fallback``, the present
+        state, if the guess is outside the domain). (y, NewtonReport), or None to hand the step
         back to the general path."""
         pressure, a_el = self._loads(loads)
-        y, status, iterations, cuts, norm = step_newton(
-            guess, fallback, anchor, self.plan, pressure, a_el, inertia, momentum, tol,
+        y, status, iterations, cuts, norm = time_step(
+            anchor, velocity, h, mass, damping, fallback, self.plan, pressure, a_el, tol, size,
             options.max_iterations, options.max_cuts)
         if status == HANDED_BACK:
             return None
@@ -528,6 +530,22 @@ def max_step(q, dq, P):
 @njit(cache=True, nogil=True)
 def _norm(r):
     return np.max(np.abs(r)) if r.size else 0.0
+
+
+@njit(cache=True, nogil=True)
+def time_step(anchor, velocity, h, mass, damping, fallback, P, pressure, a_el, tol, size, max_iterations, max_cuts):
+    """The step's inertia M / h^2 + C / h, momentum M v / h and guess anchor + h v (on the free
+    degrees of freedom; ``mass``, ``damping`` there), the tolerance kept above the inertia term's
+    rounding floor 1e3 eps max(inertia) ``size``, then :func:`step_newton`."""
+    free = P.free
+    n = free.size
+    inertia, momentum = np.empty(n), np.empty(n)
+    for i in range(n):
+        inertia[i] = mass[i] / (h * h) + damping[i] / h
+        momentum[i] = mass[i] * velocity[free[i]] / h
+    tol = max(tol, 1e3 * np.finfo(np.float64).eps * np.max(inertia) * size)
+    return step_newton(anchor + h * velocity, fallback, anchor, P, pressure, a_el, inertia, momentum, tol,
+                       max_iterations, max_cuts)
 
 
 @njit(cache=True, nogil=True)

@@ -280,6 +280,11 @@ class _Stepper:
         Newton starts from the predictor q + h v + h^2 a (``accel`` a: the last step's
         acceleration; y - q - h v = h^2 a_new exactly) if it is admissible, else from ``current``
         (the present state, always admissible; default q)."""
+        if self.compiled is not None and accel is None:
+            done = self.compiled.solve(q, v, h, loads, q if current is None else current, self._mass_free,
+                                       self._damping_free, self.tol, self._size, self.options.newton)
+            if done is not None:
+                return done
         scene, free = self.scene, self.free
         inertia_free = self._mass_free / h ** 2 + self._damping_free / h
         momentum = self._mass_free * v[free] / h
@@ -296,11 +301,6 @@ class _Stepper:
         guess = q + h * v if accel is None else q + h * v + (h * h) * accel
         # the inertia term's rounding floor, eps |q| M / h^2, grows as h falls: keep the tolerance above it
         tol = max(self.tol, 1e3 * EPS * float(inertia_free.max()) * self._size)
-        if self.compiled is not None:
-            done = self.compiled.solve(q, guess, q if current is None else current, loads, inertia_free, momentum, tol,
-                                       self.options.newton)
-            if done is not None:
-                return done
         if scene.inadmissible(guess) is not None:
             guess = q if current is None else current
         solver = functools.partial(newton, merit=self.options.line_search)
@@ -513,9 +513,9 @@ class _Recorder:
 
     def _measures(self, q, loads):
         """(potential energy, volume, contact report, smallest gap) at q."""
-        from .contact import contact_report
         if self.compiled is not None:
             return self.compiled.measures(q, loads)
+        from .contact import contact_report
         return self.scene.energy(q, loads), self.scene.volume(q), contact_report(self.scene, q), self._gap(q)
 
     def record(self, t, q, v, loads, dt, iterations, force=False):
