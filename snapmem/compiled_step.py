@@ -167,16 +167,25 @@ class CompiledStep:
         momentum = np.zeros(n_free) if momentum is None else momentum
         return assemble(q, self.plan, *self._loads(loads), inertia, anchor, momentum, 2)
 
-    def measures(self, q, loads) -> tuple:
-        """(potential energy [J], volume [m^3], contact report, smallest gap [m]) at q: what
-        ``Scene.energy``, ``Scene.volume``, :func:`snapmem.contact.contact_report` and
-        :meth:`min_gap` give, in one compiled call."""
-        energy, volume, forces, gaps = frame_measures(q, self.plan, *self._loads(loads))
-        report = {}
+    def measures_many(self, Q, loads: list) -> tuple:
+        """Potential energy [J], volume [m^3] and smallest contact gap [m] of every state (rows of Q,
+        each with its loads), each (T,), and the contact report's columns ``<name>_force`` [N] and
+        ``<name>_gap`` [m]: what ``Scene.energy``, ``Scene.volume``, :meth:`min_gap` and
+        :func:`snapmem.contact.contact_report` give, in one compiled call."""
+        coefficients = np.array([self._loads(each) for each in loads], dtype=float).reshape(-1, 2)   # (pressure, a_el)
+        energy, volume, forces, gaps = frames_measures(np.ascontiguousarray(Q, dtype=float), self.plan,
+                                                       coefficients[:, 0].copy(), coefficients[:, 1].copy())
+        columns = {}
         for name, i in self._contacts:
-            report[f"{name}_force"] = float(forces[i])
-            report[f"{name}_gap"] = float(gaps[i])
-        return float(energy), float(volume), report, (float(gaps.min()) if gaps.size else np.inf)
+            columns[f"{name}_force"] = forces[:, i]
+            columns[f"{name}_gap"] = gaps[:, i]
+        smallest = gaps.min(axis=1) if gaps.shape[1] else np.full(len(Q), np.inf)
+        return energy, volume, smallest, columns
+
+    def measures(self, q, loads) -> tuple:
+        """:meth:`measures_many` of one state: (energy, volume, contact report dict, smallest gap)."""
+        energy, volume, gap, columns = self.measures_many(q[None], [loads])
+        return float(energy[0]), float(volume[0]), {k: float(v[0]) for k, v in columns.items()}, float(gap[0])
 
     def min_gap(self, q) -> float:
         """Smallest gap of all contacts at q [m] (inf without contact)."""
@@ -492,6 +501,19 @@ def frame_measures(q, P, pressure, a_el):
         for e in range(d.size):
             forces[n_lin + c] += P.ball_coef[c, e] * _barrier_slope(d[e], P.ball_dhat[c])
     return energy, volume, forces, contact_gaps(q, P)
+
+
+@njit(cache=True, nogil=True)
+def frames_measures(Q, P, pressure, a_el):
+    """:func:`frame_measures` of every row of Q (with its pressure and electric coefficient):
+    energies (T,), volumes (T,), forces (T, C), gaps (T, C)."""
+    T = Q.shape[0]
+    n_contacts = P.lin_axis.size + P.ball_radius.size
+    energy, volume = np.empty(T), np.empty(T)
+    forces, gaps = np.empty((T, n_contacts)), np.empty((T, n_contacts))
+    for t in range(T):
+        energy[t], volume[t], forces[t], gaps[t] = frame_measures(Q[t], P, pressure[t], a_el[t])
+    return energy, volume, forces, gaps
 
 
 @njit(cache=True, nogil=True)

@@ -486,11 +486,12 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
 
 
 class _Recorder:
-    """Collects frames; cheap per-step work (smallest gap) every step, the rest per frame.
+    """Collects frames: the state every frame, the smallest contact gap every step; the frames'
+    energies, volumes and contact reports when the trajectory is built.
 
-    With the scene's compiled step (``compiled``), a frame's energy, volume and contact report
-    come from one compiled call (``CompiledStep.measures``) instead of three assemblies: the
-    profile of ``ball_drop`` showed recording taking as long as the time steps' Newton solves.
+    With the scene's compiled step (``compiled``) those come from one compiled call over all
+    frames (``CompiledStep.measures_many``) instead of three assemblies per frame: the profile
+    of ``ball_drop`` showed per-frame measures taking as long as the time steps' Newton solves.
     """
 
     def __init__(self, scene: Scene, mass, interval: float, compiled: CompiledStep | None = None):
@@ -498,6 +499,7 @@ class _Recorder:
         self.scene, self.mass, self.interval, self.compiled = scene, mass, interval, compiled
         self.contacts = contact_terms(scene)
         self.rows: list[dict] = []
+        self.loads: list[dict] = []
         self.last_t = -np.inf
         self.min_gap = np.inf
 
@@ -511,34 +513,41 @@ class _Recorder:
                 if t in self.contacts]
         return min(gaps)
 
-    def _measures(self, q, loads):
-        """(potential energy, volume, contact report, smallest gap) at q."""
-        if self.compiled is not None:
-            return self.compiled.measures(q, loads)
-        from .contact import contact_report
-        return self.scene.energy(q, loads), self.scene.volume(q), contact_report(self.scene, q), self._gap(q)
-
     def record(self, t, q, v, loads, dt, iterations, force=False):
         if not force and t - self.last_t < self.interval:
             self.min_gap = min(self.min_gap, self._gap(q))
             return
         if self.rows and self.rows[-1]["t"] == t:
             self.rows.pop()
+            self.loads.pop()
         kinetic = 0.5 * float(self.mass @ (v * v))
-        potential, volume, contacts, gap = self._measures(q, loads)
-        self.min_gap = min(self.min_gap, gap)
-        row = {"t": t, "q": q.copy(), "v": v.copy(), "volume": volume, "kinetic": kinetic, "potential": potential,
-               "total": kinetic + potential, "dt": dt, "newton": iterations, "min_gap": self.min_gap}
-        row.update(("load_" + k, val) for k, val in loads.items())
-        row.update(contacts)
-        self.rows.append(row)
+        self.rows.append({"t": t, "q": q.copy(), "v": v.copy(), "kinetic": kinetic, "dt": dt, "newton": iterations,
+                          "min_gap": self.min_gap})          # the frame's own gap joins it when measured
+        self.loads.append(loads)
         self.last_t = t
         self.min_gap = np.inf
+
+    def _measures(self, Q):
+        """Potential energy, volume, smallest gap (T,) and contact report columns of the frames Q."""
+        if self.compiled is not None:
+            return self.compiled.measures_many(Q, self.loads)
+        from .contact import contact_report
+        scene = self.scene
+        reports = [contact_report(scene, q) for q in Q]
+        columns = {k: np.array([r[k] for r in reports]) for k in (reports[0] if reports else {})}
+        return (np.array([scene.energy(q, loads) for q, loads in zip(Q, self.loads)]),
+                np.array([scene.volume(q) for q in Q]), np.array([self._gap(q) for q in Q]), columns)
 
     def trajectory(self, meta) -> Trajectory:
         """The frames as arrays; node coordinates and body heights and speeds split off q and v."""
         keys = self.rows[0].keys()
         data = {k: np.array([row[k] for row in self.rows]) for k in keys}
+        potential, volume, gap, contacts = self._measures(data["q"])
+        data.update(volume=volume, potential=potential, total=data["kinetic"] + potential,
+                    min_gap=np.minimum(data["min_gap"], gap))
+        for name in self.loads[0]:
+            data["load_" + name] = np.array([loads[name] for loads in self.loads])
+        data.update(contacts)
         n = self.scene.n_node_dofs
         data["r"], data["z"] = data["q"][:, 0:n:2].copy(), data["q"][:, 1:n:2].copy()
         for i, body in enumerate(self.scene.bodies):
