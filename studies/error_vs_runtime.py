@@ -76,6 +76,7 @@ def dynamic_rows(dts, nodes):
     p = lambda t: min(rate * t, p_max)
     ode = exact.balloon_dynamics(p, t_end, xi=0.5)
     scene = build_scene("balloon", nodes=nodes)
+    simulate(scene, None, 0.01, options=DynamicsOptions(dt=0.01, adaptive=False))   # load the compiled step first
     rows = []
     for scheme in ("euler", "midpoint", "bdf2"):
         for dt in dts:
