@@ -234,6 +234,18 @@ def band_matvec(lower: np.ndarray, x: np.ndarray):
     return y
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _invariant_derivatives(l1, l2):
+    """First and second derivatives of I1 and I2 in (lam1, lam2) at one edge (incompressible):
+    (i1_1, i1_2, i1_11, i1_12, i1_22, i2_1, i2_2, i2_11, i2_12, i2_22)."""
+    a2, b2 = l1 * l1, l2 * l2
+    inv = 1.0 / (a2 * b2)
+    return (2.0 * l1 - 2.0 * inv / l1, 2.0 * l2 - 2.0 * inv / l2,
+            2.0 + 6.0 * inv / a2, 4.0 * inv / (l1 * l2), 2.0 + 6.0 * inv / b2,
+            -2.0 / (a2 * l1) + 2.0 * l1 * b2, -2.0 / (b2 * l2) + 2.0 * a2 * l2,
+            6.0 / (a2 * a2) + 2.0 * b2, 4.0 * l1 * l2, 6.0 / (b2 * b2) + 2.0 * a2)
+
+
 @njit(cache=True, nogil=True)
 def invariant_chain(lam1, lam2, W1, W2, W11, W12, W22):
     """Derivatives in (lam1, lam2) of W(I1, I2) from its derivatives in the invariants, per edge.
@@ -248,19 +260,7 @@ def invariant_chain(lam1, lam2, W1, W2, W11, W12, W22):
     w12 = np.empty(n)
     w22 = np.empty(n)
     for e in range(n):
-        l1, l2 = lam1[e], lam2[e]
-        a2, b2 = l1 * l1, l2 * l2
-        inv = 1.0 / (a2 * b2)
-        i1_1 = 2.0 * l1 - 2.0 * inv / l1
-        i1_2 = 2.0 * l2 - 2.0 * inv / l2
-        i1_11 = 2.0 + 6.0 * inv / a2
-        i1_12 = 4.0 * inv / (l1 * l2)
-        i1_22 = 2.0 + 6.0 * inv / b2
-        i2_1 = -2.0 / (a2 * l1) + 2.0 * l1 * b2
-        i2_2 = -2.0 / (b2 * l2) + 2.0 * a2 * l2
-        i2_11 = 6.0 / (a2 * a2) + 2.0 * b2
-        i2_12 = 4.0 * l1 * l2
-        i2_22 = 6.0 / (b2 * b2) + 2.0 * a2
+        i1_1, i1_2, i1_11, i1_12, i1_22, i2_1, i2_2, i2_11, i2_12, i2_22 = _invariant_derivatives(lam1[e], lam2[e])
         A1, A2, A11, A12, A22 = W1[e], W2[e], W11[e], W12[e], W22[e]
         w1[e] = A1 * i1_1 + A2 * i2_1
         w2[e] = A1 * i1_2 + A2 * i2_2
@@ -349,8 +349,8 @@ def linear_law_density(lam1, lam2, W1, W2):
     """W = W1 (I1 - 3) + W2 (I2 - 3) with constant W1, W2 (neo-Hookean, Mooney-Rivlin) and its
     derivatives in (lam1, lam2), in one pass: returns (w, w1, w2, w11, w12, w22), each (E,).
 
-    :func:`invariant_chain` with its second invariant derivatives zero, written out (no
-    temporaries: a time step assembles this ~7 times).
+    :func:`invariant_chain` with its second invariant derivatives zero (no temporaries: a time
+    step assembles this ~7 times).
     """
     n = lam1.size
     w, w1, w2 = np.empty(n), np.empty(n), np.empty(n)
@@ -358,13 +358,13 @@ def linear_law_density(lam1, lam2, W1, W2):
     for e in range(n):
         l1, l2 = lam1[e], lam2[e]
         a2, b2 = l1 * l1, l2 * l2
-        inv = 1.0 / (a2 * b2)
-        w[e] = W1 * (a2 + b2 + inv - 3.0) + W2 * (1.0 / a2 + 1.0 / b2 + a2 * b2 - 3.0)
-        w1[e] = W1 * (2.0 * l1 - 2.0 * inv / l1) + W2 * (-2.0 / (a2 * l1) + 2.0 * l1 * b2)
-        w2[e] = W1 * (2.0 * l2 - 2.0 * inv / l2) + W2 * (-2.0 / (b2 * l2) + 2.0 * a2 * l2)
-        w11[e] = W1 * (2.0 + 6.0 * inv / a2) + W2 * (6.0 / (a2 * a2) + 2.0 * b2)
-        w12[e] = W1 * (4.0 * inv / (l1 * l2)) + W2 * (4.0 * l1 * l2)
-        w22[e] = W1 * (2.0 + 6.0 * inv / b2) + W2 * (6.0 / (b2 * b2) + 2.0 * a2)
+        w[e] = W1 * (a2 + b2 + 1.0 / (a2 * b2) - 3.0) + W2 * (1.0 / a2 + 1.0 / b2 + a2 * b2 - 3.0)
+        i1_1, i1_2, i1_11, i1_12, i1_22, i2_1, i2_2, i2_11, i2_12, i2_22 = _invariant_derivatives(l1, l2)
+        w1[e] = W1 * i1_1 + W2 * i2_1
+        w2[e] = W1 * i1_2 + W2 * i2_2
+        w11[e] = W1 * i1_11 + W2 * i2_11
+        w12[e] = W1 * i1_12 + W2 * i2_12
+        w22[e] = W1 * i1_22 + W2 * i2_22
     return w, w1, w2, w11, w12, w22
 
 
