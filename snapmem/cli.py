@@ -260,8 +260,7 @@ def cmd_simulate(args) -> int:
     for name, value in lines.items():
         print(f"{name}: {value:.6g}" if isinstance(value, float) else f"{name}: {value}")
     if args.out:
-        traj.save(args.out)
-        print(f"saved: {args.out}")
+        print(f"saved: {traj.save(args.out)}")
     return 0 if meta["status"] == "completed" else 1
 
 

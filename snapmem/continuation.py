@@ -183,7 +183,8 @@ class Branch:
             if p.tangent is not None:
                 tangent[i] = p.tangent
         problem = make_problem(self.scene, self.control)
-        np.savez_compressed(
+        from .results import write_npz
+        write_npz(
             path, x=np.array([p.x for p in self.states]), lam=np.array([p.lam for p in self.states]),
             q=np.array([problem.state(p.x, p.lam)[0] for p in self.states]), tangent=tangent,
             negative_eigs=np.array([-1 if p.negative is None else p.negative for p in self.states]),

@@ -231,11 +231,13 @@ class Trajectory:
     def final_q(self) -> np.ndarray:
         return self.data["q"][-1]
 
-    def save(self, path) -> None:
-        """Write a compressed .npz that loads without pickle (meta as a JSON string)."""
+    def save(self, path):
+        """Write a compressed .npz that loads without pickle (meta as a JSON string); atomically, so
+        an interrupted save leaves no half file. Returns the path written ('.npz' appended if missing)."""
+        from .results import write_npz
         arrays = {k: np.asarray(v) for k, v in self.data.items()}
         arrays["meta"] = np.array(json.dumps(self.meta, default=_json_default))
-        np.savez_compressed(path, **arrays)
+        return write_npz(path, **arrays)
 
     @classmethod
     def load(cls, path) -> "Trajectory":
@@ -384,94 +386,96 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     p = options.order
     length = scene.meridian.size
     breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
-    while t < t_end - 1e-12 * max(1.0, abs(t_end)):
-        if steps + rejected >= options.max_steps:
-            status = f"max_steps = {options.max_steps} reached at t = {t:.6g} s"
-            break
-        dt = min(dt, t_end - t)
-        upcoming = [b for b in breaks if t + 1e-12 < b < t + dt]
-        if upcoming:                                  # land on schedule kinks
-            dt = upcoming[0] - t
-        if t_end - (t + dt) < 1e-3 * dt:
-            dt = t_end - t
-        bdf2 = options.scheme == "bdf2" and history is not None
-        if bdf2:
-            # variable-step BDF2: v_{n+1} = (y - x_hat) / h, a_{n+1} = (v_{n+1} - v_hat) / h
-            w = dt / history[2]
-            a0, a1, a2 = (1 + 2 * w) / (1 + w), -(1 + w), w * w / (1 + w)
-            h = dt / a0
-            x_hat = -(a1 * q + a2 * history[0]) / a0
-            v_hat = -(a1 * v + a2 * history[1]) / a0
-            y, report = stepper.solve(x_hat, v_hat, h, loads_at(t + dt), current=q)
-        else:
-            h = dt / 2 if options.scheme == "midpoint" else dt
-            y, report = stepper.solve(q, v, h, loads_at(t + h))
-        iterations += report.iterations
-        cuts += report.step_cuts
-        if not report.converged:
-            rejected += 1
-            dt *= 0.25
-            log.debug("t = %.6g: Newton failed (%s); dt -> %.3g", t, report.reason, dt)
-            if dt < options.dt_min:
-                status = f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s (Newton: {report.reason})"
+    try:
+        while t < t_end - 1e-12 * max(1.0, abs(t_end)):
+            if steps + rejected >= options.max_steps:
+                status = f"max_steps = {options.max_steps} reached at t = {t:.6g} s"
                 break
-            continue
-        order = p
-        if bdf2:
-            q_new, v_new = y, (y - x_hat) / h
-        elif options.scheme == "bdf2":            # its first step: implicit Euler
-            q_new, v_new, order = y, (y - q) / h, 1
-        elif p == 2:
-            q_new = 2.0 * y - q
-            v_new = 2.0 * (y - q) / h - v
-            if scene.inadmissible(q_new) is not None:
-                # the extrapolation crossed a contact gap (or a lock): take this step by implicit
-                # Euler instead, whose state is Newton's own and so always admissible
-                y, report_euler = stepper.solve(q, v, dt, loads_at(t + dt))
-                iterations += report_euler.iterations
-                if not report_euler.converged:
-                    rejected += 1
-                    dt *= 0.25
-                    if dt < options.dt_min:
-                        status = (f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
-                                  f"(Newton: {report_euler.reason})")
-                        break
-                    continue
-                q_new, v_new, order = y, (y - q) / dt, 1
-                report.iterations += report_euler.iterations
-                fallbacks += 1
-        else:
-            q_new, v_new = y, (y - q) / h
-        a_new = (v_new - v_hat) / h if bdf2 and options.adaptive else (v_new - v) / dt
-        err = 0.0
-        if options.adaptive:
-            c_err = 2.0 / 9.0 if bdf2 else 1.0 / 6.0
-            change = np.abs(a_new - a_prev) if order == 2 else np.abs(a_new)
-            est = (c_err if order == 2 else 0.5) * dt * dt * float(change[free].max())
-            size = max(length, float(np.abs(q_new[: scene.n_node_dofs]).max()))     # grows with the membrane
-            err = est / (options.tol * size)
-            if err > 1.0 and dt > options.dt_min:
+            dt = min(dt, t_end - t)
+            upcoming = [b for b in breaks if t + 1e-12 < b < t + dt]
+            if upcoming:                                  # land on schedule kinks
+                dt = upcoming[0] - t
+            if t_end - (t + dt) < 1e-3 * dt:
+                dt = t_end - t
+            bdf2 = options.scheme == "bdf2" and history is not None
+            if bdf2:
+                # variable-step BDF2: v_{n+1} = (y - x_hat) / h, a_{n+1} = (v_{n+1} - v_hat) / h
+                w = dt / history[2]
+                a0, a1, a2 = (1 + 2 * w) / (1 + w), -(1 + w), w * w / (1 + w)
+                h = dt / a0
+                x_hat = -(a1 * q + a2 * history[0]) / a0
+                v_hat = -(a1 * v + a2 * history[1]) / a0
+                y, report = stepper.solve(x_hat, v_hat, h, loads_at(t + dt), current=q)
+            else:
+                h = dt / 2 if options.scheme == "midpoint" else dt
+                y, report = stepper.solve(q, v, h, loads_at(t + h))
+            iterations += report.iterations
+            cuts += report.step_cuts
+            if not report.converged:
                 rejected += 1
-                dt = max(options.dt_min, dt * max(0.2, 0.9 * err ** (-1.0 / (order + 1))))
+                dt *= 0.25
+                log.debug("t = %.6g: Newton failed (%s); dt -> %.3g", t, report.reason, dt)
+                if dt < options.dt_min:
+                    status = f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s (Newton: {report.reason})"
+                    break
                 continue
-        t += dt
-        history = (q, v, dt)
-        q, v, a_prev = q_new, v_new, a_new
-        steps += 1
-        recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations,
-                        force=t >= t_end - 1e-12 * max(1.0, abs(t_end)))
-        if progress is not None:
-            progress(t, t_end)
-        if stop is not None and stop(t, q, v):
-            recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations, force=True)
-            break
-        if options.adaptive:
-            grow = 2.0 if err == 0.0 else min(2.0, 0.9 * err ** (-1.0 / (order + 1)))
-            if report.iterations > 6:
-                grow = min(grow, 1.0)
-            dt = min(options.dt_max, max(options.dt_min, dt * grow))
-        else:
-            dt = options.dt          # a fixed step returns to its size after a cut or a landing on a kink
+            order = p
+            if bdf2:
+                q_new, v_new = y, (y - x_hat) / h
+            elif options.scheme == "bdf2":            # its first step: implicit Euler
+                q_new, v_new, order = y, (y - q) / h, 1
+            elif p == 2:
+                q_new = 2.0 * y - q
+                v_new = 2.0 * (y - q) / h - v
+                if scene.inadmissible(q_new) is not None:
+                    # the extrapolation crossed a contact gap (or a lock): take this step by implicit
+                    # Euler instead, whose state is Newton's own and so always admissible
+                    y, report_euler = stepper.solve(q, v, dt, loads_at(t + dt))
+                    iterations += report_euler.iterations
+                    if not report_euler.converged:
+                        rejected += 1
+                        dt *= 0.25
+                        if dt < options.dt_min:
+                            status = (f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
+                                      f"(Newton: {report_euler.reason})")
+                            break
+                        continue
+                    q_new, v_new, order = y, (y - q) / dt, 1
+                    report.iterations += report_euler.iterations
+                    fallbacks += 1
+            else:
+                q_new, v_new = y, (y - q) / h
+            a_new = (v_new - v_hat) / h if bdf2 and options.adaptive else (v_new - v) / dt
+            err = 0.0
+            if options.adaptive:
+                c_err = 2.0 / 9.0 if bdf2 else 1.0 / 6.0
+                change = np.abs(a_new - a_prev) if order == 2 else np.abs(a_new)
+                est = (c_err if order == 2 else 0.5) * dt * dt * float(change[free].max())
+                size = max(length, float(np.abs(q_new[: scene.n_node_dofs]).max()))     # grows with the membrane
+                err = est / (options.tol * size)
+                if err > 1.0 and dt > options.dt_min:
+                    rejected += 1
+                    dt = max(options.dt_min, dt * max(0.2, 0.9 * err ** (-1.0 / (order + 1))))
+                    continue
+            # one assignment, so that an interrupt cannot leave t and the state apart
+            t, history, q, v, a_prev = t + dt, (q, v, dt), q_new, v_new, a_new
+            steps += 1
+            recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations,
+                            force=t >= t_end - 1e-12 * max(1.0, abs(t_end)))
+            if progress is not None:
+                progress(t, t_end)
+            if stop is not None and stop(t, q, v):
+                recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations, force=True)
+                break
+            if options.adaptive:
+                grow = 2.0 if err == 0.0 else min(2.0, 0.9 * err ** (-1.0 / (order + 1)))
+                if report.iterations > 6:
+                    grow = min(grow, 1.0)
+                dt = min(options.dt_max, max(options.dt_min, dt * grow))
+            else:
+                dt = options.dt          # a fixed step returns to its size after a cut or a landing on a kink
+    except KeyboardInterrupt:                          # keep what was computed: the frames up to here
+        status = f"interrupted at t = {t:.6g} s"
     if status != "completed":
         log.warning("simulation stopped early: %s", status)
         recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)
@@ -499,7 +503,6 @@ class _Recorder:
         self.scene, self.mass, self.interval, self.compiled = scene, mass, interval, compiled
         self.contacts = contact_terms(scene)
         self.rows: list[dict] = []
-        self.loads: list[dict] = []
         self.last_t = -np.inf
         self.min_gap = np.inf
 
@@ -519,34 +522,32 @@ class _Recorder:
             return
         if self.rows and self.rows[-1]["t"] == t:
             self.rows.pop()
-            self.loads.pop()
         kinetic = 0.5 * float(self.mass @ (v * v))
         self.rows.append({"t": t, "q": q.copy(), "v": v.copy(), "kinetic": kinetic, "dt": dt, "newton": iterations,
-                          "min_gap": self.min_gap})          # the frame's own gap joins it when measured
-        self.loads.append(loads)
+                          "min_gap": self.min_gap, "loads": loads})    # the frame's own gap joins it when measured
         self.last_t = t
         self.min_gap = np.inf
 
-    def _measures(self, Q):
+    def _measures(self, Q, loads):
         """Potential energy, volume, smallest gap (T,) and contact report columns of the frames Q."""
         if self.compiled is not None:
-            return self.compiled.measures_many(Q, self.loads)
+            return self.compiled.measures_many(Q, loads)
         from .contact import contact_report
         scene = self.scene
         reports = [contact_report(scene, q) for q in Q]
         columns = {k: np.array([r[k] for r in reports]) for k in (reports[0] if reports else {})}
-        return (np.array([scene.energy(q, loads) for q, loads in zip(Q, self.loads)]),
+        return (np.array([scene.energy(q, each) for q, each in zip(Q, loads)]),
                 np.array([scene.volume(q) for q in Q]), np.array([self._gap(q) for q in Q]), columns)
 
     def trajectory(self, meta) -> Trajectory:
         """The frames as arrays; node coordinates and body heights and speeds split off q and v."""
-        keys = self.rows[0].keys()
-        data = {k: np.array([row[k] for row in self.rows]) for k in keys}
-        potential, volume, gap, contacts = self._measures(data["q"])
+        loads = [row["loads"] for row in self.rows]
+        data = {k: np.array([row[k] for row in self.rows]) for k in self.rows[0] if k != "loads"}
+        potential, volume, gap, contacts = self._measures(data["q"], loads)
         data.update(volume=volume, potential=potential, total=data["kinetic"] + potential,
                     min_gap=np.minimum(data["min_gap"], gap))
-        for name in self.loads[0]:
-            data["load_" + name] = np.array([loads[name] for loads in self.loads])
+        for name in loads[0]:
+            data["load_" + name] = np.array([each[name] for each in loads])
         data.update(contacts)
         n = self.scene.n_node_dofs
         data["r"], data["z"] = data["q"][:, 0:n:2].copy(), data["q"][:, 1:n:2].copy()

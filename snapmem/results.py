@@ -6,6 +6,7 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from . import __version__
@@ -27,6 +28,24 @@ def write_table(table: pd.DataFrame, path, meta: dict | None = None) -> Path:
         tmp = side.with_name(side.name + ".tmp")
         tmp.write_text(json.dumps({"snapmem": __version__, **meta}, indent=2, default=str))
         os.replace(tmp, side)
+    return path
+
+
+def write_npz(path, **arrays) -> Path:
+    """Write ``arrays`` as a compressed .npz at ``path`` ('.npz' appended if missing, as numpy does).
+
+    Written to a temporary file and renamed, so an interrupted run never leaves half a file.
+    """
+    path = Path(path)
+    if path.suffix != ".npz":
+        path = path.with_name(path.name + ".npz")
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with open(tmp, "wb") as handle:
+            np.savez_compressed(handle, **arrays)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)                    # only left if the write did not finish
     return path
 
 

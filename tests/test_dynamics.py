@@ -186,3 +186,39 @@ def test_energy_and_residual_line_searches_agree():
                         options=DynamicsOptions(scheme="bdf2", dt=0.1, adaptive=False, line_search=ls))
         out[ls] = traj["r"][:, 10]
     np.testing.assert_allclose(out["energy"], out["residual"], rtol=1e-6)
+
+
+def test_an_interrupted_simulation_keeps_its_frames():
+    """Ctrl-C (KeyboardInterrupt) during a run ends it with the frames computed so far, not nothing."""
+    scene = balloon(21)
+
+    def interrupt(t, t_end):
+        if t > 2.05:                            # after the step to t = 2.1
+            raise KeyboardInterrupt
+
+    traj = simulate(scene, {"pressure": pressure}, 10.0, rho=RHO, damping=0.5, progress=interrupt,
+                    options=DynamicsOptions(dt=0.1, adaptive=False))
+    assert traj.meta["status"].startswith("interrupted at t = 2.1")
+    assert traj["t"][-1] == pytest.approx(2.1) and traj.meta["t_end"] == pytest.approx(2.1)
+    assert len(traj["t"]) == len(traj["potential"]) == len(traj["r"]) == 22          # t = 0, 0.1, ..., 2.1
+    assert np.all(np.isfinite(traj["total"]))
+
+
+def test_an_interrupted_save_leaves_the_previous_file_whole(tmp_path, monkeypatch):
+    import snapmem.results as results
+    scene = balloon(21)
+    traj = simulate(scene, {"pressure": 0.005}, 0.3, rho=RHO, options=DynamicsOptions(dt=0.1, adaptive=False))
+    path = tmp_path / "traj"                                       # numpy's rule: .npz appended
+    traj.save(path)
+    assert (tmp_path / "traj.npz").exists()
+
+    def broken(handle, **arrays):
+        handle.write(b"PK\x03\x04 half a zip")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(results.np, "savez_compressed", broken)
+    with pytest.raises(KeyboardInterrupt):
+        traj.save(tmp_path / "traj.npz")
+    back = Trajectory.load(tmp_path / "traj.npz")
+    assert np.array_equal(back["q"], traj["q"]) and back.meta["status"] == "completed"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["traj.npz"]
