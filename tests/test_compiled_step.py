@@ -174,3 +174,26 @@ def test_domain_is_the_scenes_at_gents_lock():
         q = q0 * factor
         assert (s.inadmissible(q) is None) == inside
         assert admissible(q, step.plan) == inside
+
+
+def test_a_step_handed_back_runs_on_the_general_path(monkeypatch):
+    """Where the kernel cannot trust its LDL^T it hands the step back (HANDED_BACK): the stepper
+    then solves it by the general Newton, and the run is the general path's."""
+    ex = experiment("gripper_rod")
+    kwargs = dict(rho=ex.rho, damping=ex.damping, q0=ex.q0, options=ex.options, damp_bodies=ex.damp_bodies)
+    compiled_step.enabled = False
+    try:
+        general = simulate(ex.scene, ex.loads, 5.0, **kwargs)
+    finally:
+        compiled_step.enabled = True
+    calls = []
+
+    def hand_back(*args):
+        calls.append(1)
+        return args[0], compiled_step.HANDED_BACK, 0, 0, np.nan
+
+    monkeypatch.setattr(compiled_step, "time_step", hand_back)
+    handed = simulate(ex.scene, ex.loads, 5.0, **kwargs)
+    assert len(calls) == handed.meta["steps"] + handed.meta["rejected"] > 10
+    assert handed.meta["newton_iterations"] == general.meta["newton_iterations"]
+    assert np.array_equal(handed["q"], general["q"])
