@@ -187,11 +187,6 @@ class CompiledStep:
         smallest = gaps.min(axis=1) if gaps.shape[1] else np.full(len(Q), np.inf)
         return energy, volume, smallest, columns
 
-    def measures(self, q, loads) -> tuple:
-        """:meth:`measures_many` of one state: (energy, volume, contact report dict, smallest gap)."""
-        energy, volume, gap, columns = self.measures_many(q[None], [loads])
-        return float(energy[0]), float(volume[0]), {k: float(v[0]) for k, v in columns.items()}, float(gap[0])
-
     def min_gap(self, q) -> float:
         """Smallest gap of all contacts at q [m] (inf without contact)."""
         gaps = contact_gaps(q, self.plan)

@@ -276,13 +276,12 @@ class _Stepper:
         # the whole Newton solve in one compiled call where the scene's terms allow it
         self.compiled = (CompiledStep.of(scene) if scene.compiled and options.line_search == "energy" else None)
 
-    def solve(self, q, v, h, loads, current=None, accel=None):
+    def solve(self, q, v, h, loads, current=None):
         """y minimising the incremental potential of step h from (q, v); (y, report).
 
-        Newton starts from the predictor q + h v + h^2 a (``accel`` a: the last step's
-        acceleration; y - q - h v = h^2 a_new exactly) if it is admissible, else from ``current``
-        (the present state, always admissible; default q)."""
-        if self.compiled is not None and accel is None:
+        Newton starts from the predictor q + h v if it is admissible, else from ``current`` (the
+        present state, always admissible; default q)."""
+        if self.compiled is not None:
             done = self.compiled.solve(q, v, h, loads, q if current is None else current, self._mass_free,
                                        self._damping_free, self.tol, self._size, self.options.newton)
             if done is not None:
@@ -300,7 +299,7 @@ class _Stepper:
             K.add_diagonal(inertia_free)
             return Evaluation(energy, ev.gradient, residual, K, ev.residual_floor)
 
-        guess = q + h * v if accel is None else q + h * v + (h * h) * accel
+        guess = q + h * v
         # the inertia term's rounding floor, eps |q| M / h^2, grows as h falls: keep the tolerance above it
         tol = max(self.tol, 1e3 * EPS * float(inertia_free.max()) * self._size)
         if scene.inadmissible(guess) is not None:
