@@ -11,14 +11,18 @@ The public API::
     eq.measures()["stretch"]
 """
 
-from .errors import SnapmemError, SolverError
-from .materials import Gent, Law, InvariantLaw, MooneyRivlin, NeoHookean, Yeoh, LAWS, make_law
-from .meridian import Meridian, disc, sphere, torus
-from .newton import Equilibrium, NewtonOptions, NewtonReport, equilibrium, solve
-from .scene import Scene
-from .scenes import SCENES, Parameter, SceneSpec, build_scene, register
-from .terms import Electric, PressureWork, Stretching
-from . import contact  # noqa: F401  (registers the contact terms with TERMS)
+from snapmem import _moved
+
+_moved.install()                 # the flat module paths of snapmem 0.1 keep working
+
+from snapmem.errors import SnapmemError, SolverError
+from snapmem.model.materials import Gent, Law, InvariantLaw, MooneyRivlin, NeoHookean, Yeoh, LAWS, make_law
+from snapmem.model.meridian import Meridian, disc, sphere, torus
+from snapmem.solvers.newton import Equilibrium, NewtonOptions, NewtonReport, equilibrium, solve
+from snapmem.model.scene import Scene
+from snapmem.catalog.scenes import SCENES, Parameter, SceneSpec, build_scene, register
+from snapmem.model.terms import Electric, PressureWork, Stretching
+import snapmem.model.contact as contact  # noqa: F401  (registers the contact terms with TERMS)
 
 __all__ = [
     "SnapmemError", "SolverError",
@@ -28,4 +32,4 @@ __all__ = [
     "Equilibrium", "NewtonOptions", "NewtonReport", "equilibrium", "solve",
     "SCENES", "SceneSpec", "Parameter", "build_scene", "register",
 ]
-__version__ = "0.1.0"
+from snapmem._version import __version__  # noqa: E402

@@ -16,8 +16,8 @@ import numpy as np
 import pandas as pd
 from scipy.linalg.lapack import dgbsv
 
-from .continuation import fold_curve, trace
-from .scenes import build_scene
+from snapmem.continuation.tracer import fold_curve, trace
+from snapmem.catalog.scenes import build_scene
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +35,7 @@ def interleaved_medians(fns, min_time=0.3, min_repeats=7, max_repeats=2000):
 
 
 def newton_floor(nodes: int, scene_name: str = "balloon") -> dict:
-    """One Newton iteration (assembly, factorisation, solve: as snapmem.newton does it) against
+    """One Newton iteration (assembly, factorisation, solve: as snapmem.solvers.newton does it) against
     LAPACK's band solve dgbsv of the same matrix (the floor), and against the factorisation and
     solve the iteration uses (``K.lu().solve``: the compiled LDL^T where stable) alone."""
     scene = build_scene(scene_name, nodes=nodes, pressure=0.01)
@@ -135,8 +135,8 @@ def robotic_real_time(scenes=("pump", "gripper_rod", "gripper_shell", "ball_drop
     """Simulated time over wall time of each robotic scene with its default settings: the median of
     ``repeats`` simulations (the scene and its start state built once before, timed as ``setup_s``:
     the ball scenes' start is a static solve of the ball resting on the balloon)."""
-    from .dynamics import simulate
-    from .robots import experiment
+    from snapmem.dynamics.driver import simulate
+    from snapmem.catalog.robots import experiment
     rows = []
     for name in scenes:
         t0 = time.perf_counter()

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .errors import SnapmemError, SolverError
-from .scenes import SCENES, get_spec
+from snapmem.errors import SnapmemError, SolverError
+from snapmem.catalog.scenes import SCENES, get_spec
 
 
 class _Parser(argparse.ArgumentParser):
@@ -46,7 +46,7 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_equilibrium(args) -> int:
-    from .newton import equilibrium
+    from snapmem.solvers.newton import equilibrium
     params = parse_sets(args.set)
     if args.pressure is not None:
         params["pressure"] = args.pressure
@@ -109,8 +109,8 @@ class Progress:
 
 
 def cmd_trace(args) -> int:
-    from .continuation import ContinuationOptions, load_points, trace
-    from .results import write_table
+    from snapmem.continuation.tracer import ContinuationOptions, load_points, trace
+    from snapmem.io.results import write_table
     params = parse_sets(args.set)
     control = args.control
     with_loads = ("voltage",) if control in ("voltage", "E_hat") else ()
@@ -149,7 +149,7 @@ def cmd_trace(args) -> int:
     if args.points:
         write_table(branch.points, args.points, meta)
     if args.plot:
-        from .plotting import plot_branch
+        from snapmem.viz.plotting import plot_branch
         x = args.x or next(iter(scene.probes), "u_max")
         plot_branch(branch.table, x, control if control != "volume" else "pressure", path=args.plot,
                     title=f"{scene.name}: {branch.status}")
@@ -166,8 +166,8 @@ def cmd_trace(args) -> int:
 
 
 def cmd_fold(args) -> int:
-    from .continuation import fold_curve
-    from .results import write_table
+    from snapmem.continuation.tracer import fold_curve
+    from snapmem.io.results import write_table
     params = parse_sets(args.set)
     name, values = parse_values(args.vary)
     spec = get_spec(args.scene)
@@ -182,7 +182,7 @@ def cmd_fold(args) -> int:
     if args.out:
         write_table(table, args.out, meta)
     if args.plot:
-        from .plotting import plot_xy
+        from snapmem.viz.plotting import plot_xy
         plot_xy(table, name, f"{args.control}_limit", args.plot, title=f"{args.scene}: limit points")
     with pd.option_context("display.width", 200, "display.max_columns", 12):
         print(table[[name, f"{args.control}_limit", "exists", "method", "iterations", "u_max"]].to_string(index=False))
@@ -190,7 +190,7 @@ def cmd_fold(args) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from .sweep import make_job, parse_axis, parse_value, sweep
+    from snapmem.sweeps.sweep import make_job, parse_axis, parse_value, sweep
     fixed = parse_sets(args.set)
     if args.pressure is not None:
         fixed["pressure"] = args.pressure
@@ -233,8 +233,8 @@ def _progress_bar(stream=sys.stderr, width=40):
 def cmd_simulate(args) -> int:
     import dataclasses
     import numpy as np
-    from .robots import EXPERIMENTS, events, experiment
-    from .dynamics import simulate
+    from snapmem.catalog.robots import EXPERIMENTS, events, experiment
+    from snapmem.dynamics.driver import simulate
     params = parse_sets(args.set)
     ex = experiment(args.scene, **params)
     t_end = ex.t_end if args.t_end is None else float(args.t_end)
@@ -265,8 +265,8 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_replay(args) -> int:
-    from .dynamics import Trajectory
-    from .replay import animate
+    from snapmem.dynamics.driver import Trajectory
+    from snapmem.viz.replay import animate
     traj = Trajectory.load(args.trajectory)
     out = animate(traj, args.out, frames=args.frames, fps=args.fps)
     print(f"wrote: {out}")
@@ -274,8 +274,8 @@ def cmd_replay(args) -> int:
 
 
 def cmd_hysteresis(args) -> int:
-    from .hysteresis import hysteresis
-    from .results import write_table
+    from snapmem.continuation.hysteresis import hysteresis
+    from snapmem.io.results import write_table
     params = parse_sets(args.set)
     with_loads = ("voltage",) if args.control in ("voltage", "E_hat") else ()
     scene = get_spec(args.scene).build(with_loads, **params)
@@ -286,7 +286,7 @@ def cmd_hysteresis(args) -> int:
         write_table(loop.table, args.out, meta)
         write_table(loop.snaps, str(Path(args.out).with_suffix("")) + "_snaps.csv", meta)
     if args.plot:
-        from .plotting import plot_hysteresis
+        from snapmem.viz.plotting import plot_hysteresis
         x = next(iter(scene.probes), "u_max")
         plot_hysteresis(loop.table, loop.snaps, x, args.control, args.plot,
                         title=f"{scene.name}: hysteresis ({loop.status})")
@@ -298,8 +298,8 @@ def cmd_hysteresis(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .bench import run
-    from .results import write_table
+    from snapmem.bench import run
+    from snapmem.io.results import write_table
     table = run(quick=args.quick)
     write_table(table, args.out, {"command": "bench", "quick": args.quick})
     with pd.option_context("display.width", 220, "display.max_colwidth", 90):

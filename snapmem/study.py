@@ -14,9 +14,9 @@ from typing import Callable, Iterable
 
 import pandas as pd
 
-from .continuation import ContinuationOptions, trace
-from .results import write_table
-from .scene import Scene
+from snapmem.continuation.tracer import ContinuationOptions, trace
+from snapmem.io.results import write_table
+from snapmem.model.scene import Scene
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,7 @@ import pandas as pd
 
 from snapmem import exact
 from snapmem.bench import balloon_curve
-from snapmem.results import write_table
+from snapmem.io.results import write_table
 
 
 def main(argv=None):

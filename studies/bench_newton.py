@@ -9,7 +9,7 @@ import argparse
 import pandas as pd
 
 from snapmem.bench import newton_floor
-from snapmem.results import write_table
+from snapmem.io.results import write_table
 
 
 def main(argv=None):

@@ -2,7 +2,7 @@
 
 Each scene runs at its default tolerance and at 4x tighter; the run counts as converged when its
 events (snap times, ball impact/bounce/rebound and launch/apex, torus radius:
-snapmem.robots.events) agree with the tighter run within 1%. torus_snap's final outer radius is
+snapmem.catalog.robots.events) agree with the tighter run within 1%. torus_snap's final outer radius is
 also compared with a mesh-converged one (2x and 4x the nodes, Richardson). Real-time factor = simulated time / wall time (median of --repeats runs); also on the
 process's CPU time, which a busy shared machine disturbs less.
 
@@ -18,9 +18,9 @@ import time
 import numpy as np
 import pandas as pd
 
-from snapmem.dynamics import simulate
-from snapmem.results import write_table
-from snapmem.robots import ROBOTIC_SCENES, events, experiment
+from snapmem.dynamics.driver import simulate
+from snapmem.io.results import write_table
+from snapmem.catalog.robots import ROBOTIC_SCENES, events, experiment
 
 QUICK = {"nodes": 21}
 

@@ -20,8 +20,8 @@ import time
 import pandas as pd
 
 from snapmem import build_scene
-from snapmem.plotting import _pyplot
-from snapmem.robots import events, resting, run
+from snapmem.viz.plotting import _pyplot
+from snapmem.catalog.robots import events, resting, run
 from snapmem.study import parse_args, save
 
 

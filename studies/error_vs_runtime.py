@@ -1,7 +1,7 @@
 """Error against run time (work-precision) for the static curves, the located limit points and the
 dynamic balloon, one line per method or setting; results/error_vs_runtime.csv and PNGs.
 
-References: the balloon's exact formula and its ODE in time (snapmem.exact); the plate and the
+References: the balloon's exact formula and its ODE in time (snapmem.reference.exact); the plate and the
 torus by Richardson extrapolation of the two finest meshes (the discretisation converges as N^-2).
 Every time is the median of three runs on this machine.
 """
@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 
 from snapmem import build_scene, exact
-from snapmem.continuation import ContinuationOptions, trace
-from snapmem.dynamics import DynamicsOptions, schedule, simulate
-from snapmem.plotting import plot_xy
+from snapmem.continuation.tracer import ContinuationOptions, trace
+from snapmem.dynamics.driver import DynamicsOptions, schedule, simulate
+from snapmem.viz.plotting import plot_xy
 from snapmem.study import parse_args, save
 
 

@@ -8,7 +8,7 @@ Writes fig3_plate.csv, fig3_balloon.csv, fig3_torus.csv and one PNG each.
 import numpy as np
 
 from snapmem import build_scene, exact
-from snapmem.plotting import plot_branch
+from snapmem.viz.plotting import plot_branch
 from snapmem.study import parse_args, save
 
 
@@ -20,7 +20,7 @@ def main(argv=None):
         "balloon": ("stretch", None, dict(), {"stretch": 4.0}),
         "torus": ("u_max", 10.0, dict(), {"u_max": 10.0}),
     }
-    from snapmem.continuation import trace
+    from snapmem.continuation.tracer import trace
     out = {}
     for name, (x, length, params, until) in cases.items():
         branch = trace(build_scene(name, nodes=nodes, **params), "pressure", until=until)

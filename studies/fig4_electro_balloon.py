@@ -8,7 +8,7 @@ is above the unactuated limit pressure, so the balloon has already snapped when 
 import numpy as np
 
 from snapmem import build_scene, exact
-from snapmem.plotting import plot_family
+from snapmem.viz.plotting import plot_family
 from snapmem.study import family, parse_args, save
 
 

@@ -6,7 +6,7 @@ The limit-point maps (Fig. 5 c, d) are studies/torus_limit_maps.py.
 """
 
 from snapmem import build_scene
-from snapmem.plotting import plot_family
+from snapmem.viz.plotting import plot_family
 from snapmem.study import family, parse_args, save
 
 RB = 10.0

@@ -5,8 +5,8 @@ ball heights), drawn from results/robots/*.csv. Run robot_curves.py first.
 
 import pandas as pd
 
-from snapmem.plotting import plot_branch, plot_xy, _pyplot
-from snapmem.robots import events, run
+from snapmem.viz.plotting import plot_branch, plot_xy, _pyplot
+from snapmem.catalog.robots import events, run
 from snapmem.study import parse_args, save
 
 

@@ -10,10 +10,10 @@ import time
 import pandas as pd
 
 from snapmem import build_scene
-from snapmem.continuation import trace
-from snapmem.dynamics import DynamicsOptions
-from snapmem.plotting import plot_xy
-from snapmem.robots import run
+from snapmem.continuation.tracer import trace
+from snapmem.dynamics.driver import DynamicsOptions
+from snapmem.viz.plotting import plot_xy
+from snapmem.catalog.robots import run
 from snapmem.study import parse_args, save
 
 UNTIL = {"plate": {"deflection": 7.5}, "balloon": {"stretch": 4.0}, "torus": {"u_max": 10.0}}

@@ -11,21 +11,21 @@ Two curves, each computed over the same range by every method in the same run:
 
 What each method computes:
 
-* ``ode``: ``snapmem.membrane_ode`` (solve_ivp DOP853 + root finders) at relative tolerance rtol
+* ``ode``: ``snapmem.reference.membrane_ode`` (solve_ivp DOP853 + root finders) at relative tolerance rtol
   (setting): 30 points, continuation in the apex stretch (plate, from 1.002 to its value at
   p_hat = 0.08) or the outer radius (torus), each point's pressure from the secant prediction of
   the two before. No stability.
-* ``snapmem_path``: ``snapmem.paths`` on N nodes (setting), the same 30 points: the plate at the
+* ``snapmem_path``: ``snapmem.reference.paths`` on N nodes (setting), the same 30 points: the plate at the
   pressures of the ODE's 30 apex stretches (on the reference curve), one Newton solve each
   (``load_path``); the torus at the same 30 outer radii, the pressure the unknown
   (``coordinate_path``, from the state at p_hat = 0.005 as the ODE seeds its continuation).
   No stability.
 * ``snapmem_richardson``: ``snapmem_path`` on two or three meshes (``meshes``; each twice as
-  fine) and Richardson's extrapolation (``snapmem.paths.extrapolate``) of the plate's
+  fine) and Richardson's extrapolation (``snapmem.reference.paths.extrapolate``) of the plate's
   deflection at each pressure (two meshes: h^2; three: h^2 and h^2 log h, the apex's error,
   whose observed order rises from 1.82 to 1.87 on 25 to 769 nodes) or the torus's pressure at each outer radius
   (h^2; h^4). Timed as a whole (every mesh).
-* ``snapmem``: ``snapmem.continuation.trace`` on N nodes: pseudo-arclength in pressure with its
+* ``snapmem``: ``snapmem.continuation.tracer.trace`` on N nodes: pseudo-arclength in pressure with its
   own points (17 to 36 of them) and the stability of every point (inertia, eigenvalues nearest
   zero), the limit point located. More work than the ODE does.
 
@@ -52,10 +52,10 @@ import pandas as pd
 from scipy.interpolate import CubicSpline
 
 from snapmem import build_scene, equilibrium, solve
-from snapmem.continuation import trace
-from snapmem.membrane_ode import ODEOptions, PlateODE, TorusODE
-from snapmem.paths import coordinate_path, extrapolate, load_path
-from snapmem.results import write_table
+from snapmem.continuation.tracer import trace
+from snapmem.reference.membrane_ode import ODEOptions, PlateODE, TorusODE
+from snapmem.reference.paths import coordinate_path, extrapolate, load_path
+from snapmem.io.results import write_table
 from snapmem.threads import blas_single_thread
 
 P_END, R_FIRST, R_END, M_POINTS, LAM_FIRST = 0.08, 12.05, 17.4, 30, 1.002

@@ -13,9 +13,9 @@ import numpy as np
 import pandas as pd
 
 from snapmem import build_scene
-from snapmem.continuation import ContinuationOptions, trace
-from snapmem.results import write_table
-from snapmem.robots import events, resting, run
+from snapmem.continuation.tracer import ContinuationOptions, trace
+from snapmem.io.results import write_table
+from snapmem.catalog.robots import events, resting, run
 
 
 def pump(out, nodes, quick):

@@ -16,7 +16,7 @@ the volume constraint. It is run unchanged except for the mesh refinement level 
 
 Error of a run: the largest relative deviation |p - p_exact(L)| / p_exact(L) over its steps
 with 1 < L <= 6 (SfePy's adaptive stepping may end past 6: ``error_beyond`` is the error there),
-p_exact the balloon formula of ``snapmem.exact.balloon_pressure`` (R = 1, H = 0.01, c1 = 3e5,
+p_exact the balloon formula of ``snapmem.reference.exact.balloon_pressure`` (R = 1, H = 0.01, c1 = 3e5,
 c2 = 3e4, in Pa). SfePy's time is its ``solve_pde`` wall time (one run: it takes seconds to
 minutes): the median of ``--sfepy-repeats`` runs for a level that takes under 20 s (level 0;
 its first run also pays the linear solver's first use), one run otherwise (level 1: 36 to 41 s).
@@ -25,9 +25,9 @@ snapmem, on ``build_scene("balloon", R=1, H=0.01, c1=3e5, c2=3e4, nodes=N)``, th
 
 * ``snapmem_path``: the same work as SfePy: the pressure at SfePy's own stretch steps (all of
   them, the one past L = 6 included), the equator's radius prescribed and the pressure the
-  unknown (``snapmem.paths.coordinate_path`` from the unloaded sphere), no stability;
+  unknown (``snapmem.reference.paths.coordinate_path`` from the unloaded sphere), no stability;
 * ``snapmem_richardson``: that on N and 2N - 1 nodes, the pressures extrapolated at order 2;
-* ``snapmem``: ``snapmem.continuation.trace`` in pressure until the stretch reaches 6 (its own
+* ``snapmem``: ``snapmem.continuation.tracer.trace`` in pressure until the stretch reaches 6 (its own
   42 to 47 points, through the pressure maximum and minimum, stability at every point): more
   work than SfePy does.
 
@@ -59,10 +59,10 @@ import numpy as np
 import pandas as pd
 
 from snapmem import build_scene
-from snapmem.continuation import trace
-from snapmem.exact import balloon_pressure
-from snapmem.paths import coordinate_path, extrapolate
-from snapmem.results import write_table
+from snapmem.continuation.tracer import trace
+from snapmem.reference.exact import balloon_pressure
+from snapmem.reference.paths import coordinate_path, extrapolate
+from snapmem.io.results import write_table
 
 BALLOON = {"R": 1.0, "H": 0.01, "c1": 3e5, "c2": 3e4}
 NODES = (11, 21, 41, 81, 161, 321, 641)            # the mesh size halves from one to the next

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from snapmem.sweep import EquilibriumJob, sweep
+from snapmem.sweeps.sweep import EquilibriumJob, sweep
 
 SIZE = {"plate": ("R", 7.5, 0.5), "balloon": ("R", 10.0, 0.1), "torus": ("Rb", 10.0, 0.1)}
 COLUMNS = ["volume", "u_max", "stretch_max", "min_tension", "deflection", "stretch", "outer_radius",

@@ -4,13 +4,13 @@ Gent near its lock (Jlim 5, 20, 270), thickness ratios H/R from 1e-5 to 0.1, str
 voltage up to and past the electromechanical limit with no pressure, meshes from N = 5 to 100001,
 tori up to Rs/Rb = 0.95, contact with barrier widths down to 1e-7 of the body and stiff kappa,
 fixed time steps up to 0.5 s through a snap, and a voltage so large no equilibrium exists.
-Each case succeeds against a known answer or fails with a clear message (snapmem.stress); every
-case runs through snapmem.sweep with a time limit, so none can hang.
+Each case succeeds against a known answer or fails with a clear message (snapmem.stress_cases); every
+case runs through snapmem.sweeps.sweep with a time limit, so none can hang.
 """
 
 from snapmem import stress
 from snapmem.study import parse_args, save
-from snapmem.sweep import sweep
+from snapmem.sweeps.sweep import sweep
 
 
 def main(argv=None):

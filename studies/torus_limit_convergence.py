@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 
 from snapmem import build_scene
-from snapmem.continuation import ContinuationOptions, trace
-from snapmem.plotting import plot_xy
+from snapmem.continuation.tracer import ContinuationOptions, trace
+from snapmem.viz.plotting import plot_xy
 from snapmem.study import parse_args, save
 
 

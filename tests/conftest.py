@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from snapmem.meridian import disc, sphere, torus
+from snapmem.model.meridian import disc, sphere, torus
 
 
 def perturbed(meridian, fixed, rng, scale=0.05, stretch=1.3):

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from snapmem import exact
+from snapmem.reference import exact
 from snapmem.bench import balloon_curve, newton_floor
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"

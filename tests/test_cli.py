@@ -2,7 +2,7 @@
 
 import pytest
 
-from snapmem import exact
+from snapmem.reference import exact
 from snapmem.cli import main
 
 

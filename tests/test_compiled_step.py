@@ -1,17 +1,17 @@
-"""The compiled time step (snapmem.compiled_step) against the general path it replaces: the same
+"""The compiled time step (snapmem.dynamics.compiled_step) against the general path it replaces: the same
 incremental potential, residual and tangent as Scene.evaluate plus inertia, the same Newton
 iterates, the same recorded frames, and the general path wherever a term is not covered."""
 
 import numpy as np
 import pytest
 
-import snapmem.compiled_step as compiled_step
-from snapmem.banded import BandedMatrix
-from snapmem.bordered import BodyMatrix
-from snapmem.compiled_step import CompiledStep, bordered_solve
-from snapmem.contact import contact_report
-from snapmem.dynamics import _Stepper, lumped_masses, simulate
-from snapmem.robots import events, experiment
+import snapmem.dynamics.compiled_step as compiled_step
+from snapmem.kernels.banded import BandedMatrix
+from snapmem.kernels.bordered import BodyMatrix
+from snapmem.dynamics.compiled_step import CompiledStep, bordered_solve
+from snapmem.model.contact import contact_report
+from snapmem.dynamics.driver import _Stepper, lumped_masses, simulate
+from snapmem.catalog.robots import events, experiment
 
 # (scene, parameters, time at which its loads are taken): ball with a body and a plate, rod with
 # electric, shell, a torus without contact, the Gent plate with electric
@@ -167,7 +167,7 @@ def test_uncovered_terms_take_the_general_path():
 def test_domain_is_the_scenes_at_gents_lock():
     """The plate stretched equibiaxially past the Gent lock (I1 - 3 = 2 lam^2 + lam^-4 - 3 = Jlim = 270
     at lam = 11.7) leaves the domain; short of it, it is inside: as Scene.inadmissible says."""
-    from snapmem.compiled_step import admissible
+    from snapmem.dynamics.compiled_step import admissible
     ex = experiment("pump")
     s = ex.scene
     step = CompiledStep.of(s)

@@ -4,13 +4,13 @@ steps that never cross a gap of zero, contact forces, and the bordered matrix of
 import numpy as np
 import pytest
 
-from snapmem.banded import BandedMatrix
-from snapmem.bordered import BodyMatrix
-from snapmem.contact import CONTACT_EXAMPLES, Ball, Plane, Rod, Shell, barrier, contact_report
-from snapmem.meridian import sphere, torus
-from snapmem.scene import Scene
-from snapmem.terms import TERMS, PressureWork, Stretching
-from snapmem.materials import make_law
+from snapmem.kernels.banded import BandedMatrix
+from snapmem.kernels.bordered import BodyMatrix
+from snapmem.model.contact import CONTACT_EXAMPLES, Ball, Plane, Rod, Shell, barrier, contact_report
+from snapmem.model.meridian import sphere, torus
+from snapmem.model.scene import Scene
+from snapmem.model.terms import TERMS, PressureWork, Stretching
+from snapmem.model.materials import make_law
 
 
 def test_barrier_derivatives_and_smoothness():
@@ -105,7 +105,7 @@ def test_max_step_never_crosses_a_gap(kind):
 def test_contact_force_of_a_pressed_ring_balances_the_pressure():
     """A torus inflated against a rod: the rod's total force equals the pressure force on the
     contact patch only loosely, but Newton's equilibrium has zero residual and positive gaps."""
-    from snapmem.newton import NewtonOptions, solve
+    from snapmem.solvers.newton import NewtonOptions, solve
     m = torus(0.1, 0.02, 60)
     law = make_law("mooney_rivlin", c1=4.225e5 * 7 / 16, c2=4.225e5 / 16)
     rod = Rod(kappa=1e4, dhat=1e-3, radius=0.0795)
@@ -200,11 +200,11 @@ def test_a_long_edge_cannot_pass_through_the_ball():
 
 @pytest.mark.parametrize("mass", [None, 0.5])
 def test_compiled_ball_edge_barrier_matches_the_numpy_edge_gaps(mass):
-    """snapmem.contact_kernels.ball_edge_barrier against Ball.edge_gap (numpy) and barrier(), on a
+    """snapmem.kernels.contact.ball_edge_barrier against Ball.edge_gap (numpy) and barrier(), on a
     dimpled cap where the centre projects inside edges (line case) and onto nodes (end case)."""
     from scipy.optimize import brentq
 
-    from snapmem.contact_kernels import ball_edge_barrier, ball_edge_gaps
+    from snapmem.kernels.contact import ball_edge_barrier, ball_edge_gaps
     m = sphere(0.1, 41)
     x = m.q.reshape(-1, 2).copy()
     x[:, 1] -= 0.02 * np.exp(-(x[:, 0] / 0.06) ** 2)            # a dimple under the ball

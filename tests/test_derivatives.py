@@ -4,9 +4,9 @@ symmetry and Taylor remainders of slope 2, on random perturbed states of all thr
 import numpy as np
 import pytest
 
-from snapmem.materials import EXAMPLES, LAWS, Gent, make_law
-from snapmem.scene import Scene
-from snapmem.terms import TERMS, Stretching
+from snapmem.model.materials import EXAMPLES, LAWS, Gent, make_law
+from snapmem.model.scene import Scene
+from snapmem.model.terms import TERMS, Stretching
 
 from conftest import SHAPES, perturbed
 
@@ -123,7 +123,7 @@ def test_compiled_assembly_matches_the_numpy_reference(name, extra, rng, monkeyp
 
 def assert_compiled_matches_numpy(scene, q, monkeypatch, tol):
     """The scene's energy, gradient and stiffness at q by the compiled kernels and by numpy."""
-    from snapmem import kinematics, materials
+    from snapmem.model import kinematics, materials
     fast = scene.evaluate(q)
     monkeypatch.setattr(Scene, "compiled", False)
     monkeypatch.setattr(materials, "compiled_chain", False)
@@ -150,8 +150,8 @@ def test_laws_take_scalars_and_arrays_alike(law):
 def test_compiled_assembly_matches_the_numpy_reference_with_contact(name, t_end, monkeypatch):
     """Scenes with node terms and a rigid body: the compiled membrane plus the node terms against the
     numpy membrane plus the same node terms, at a state in contact (ball pressing; torus on its rod)."""
-    from snapmem.contact import contact_report
-    from snapmem.robots import experiment, run
+    from snapmem.model.contact import contact_report
+    from snapmem.catalog.robots import experiment, run
     scene = experiment(name, nodes=31).scene
     q = run(name, nodes=31, t_end=t_end).final_q
     assert any(v > 0 for k, v in contact_report(scene, q).items() if k.endswith("_force"))

@@ -6,9 +6,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from snapmem import MooneyRivlin, PressureWork, Scene, Stretching, sphere
-from snapmem.dynamics import (DynamicsOptions, PiecewiseLinear, Trajectory, lumped_masses, schedule, settle,
+from snapmem.dynamics.driver import (DynamicsOptions, PiecewiseLinear, Trajectory, lumped_masses, schedule, settle,
                               simulate)
-from snapmem.newton import solve
+from snapmem.solvers.newton import solve
 
 R, H, C1, C2 = 10.0, 0.1, 0.4375, 0.0625
 RHO = 1.0
@@ -101,7 +101,7 @@ def test_error_against_the_ode_falls_as_n_to_the_minus_two():
 
 def test_midpoint_conserves_energy_over_100_periods_undamped():
     """A small breathing oscillation about the equilibrium at p_hat = 0.01, no damping."""
-    from snapmem import exact
+    from snapmem.reference import exact
     scene = balloon(21)
     p = 0.01
     lam = exact.balloon_stretch(p)
@@ -163,7 +163,7 @@ def test_trajectory_roundtrip_without_pickle(tmp_path):
 
 def test_settle_after_the_limit_point_lands_on_the_far_branch():
     """Just past the balloon's limit pressure, the damped motion comes to rest on the far branch."""
-    from snapmem import exact
+    from snapmem.reference import exact
     scene = balloon(41)
     lam_lp, p_lp = exact.balloon_limit_point()
     p = p_lp * 1.002
@@ -205,7 +205,7 @@ def test_an_interrupted_simulation_keeps_its_frames():
 
 
 def test_an_interrupted_save_leaves_the_previous_file_whole(tmp_path, monkeypatch):
-    import snapmem.results as results
+    import snapmem.io.results as results
     scene = balloon(21)
     traj = simulate(scene, {"pressure": 0.005}, 0.3, rho=RHO, options=DynamicsOptions(dt=0.1, adaptive=False))
     path = tmp_path / "traj"                                       # numpy's rule: .npz appended

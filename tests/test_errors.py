@@ -8,7 +8,7 @@ import pytest
 
 from snapmem import SnapmemError, build_scene, disc, sphere, torus, Meridian
 from snapmem.cli import main
-from snapmem.materials import Gent, MooneyRivlin
+from snapmem.model.materials import Gent, MooneyRivlin
 
 # (scene, parameters, words the message must contain)
 BAD_SCENES = [

@@ -4,7 +4,7 @@ import pytest
 from scipy.optimize import brentq
 
 from snapmem import build_scene, exact
-from snapmem.hysteresis import hysteresis
+from snapmem.continuation.hysteresis import hysteresis
 
 
 def test_balloon_hysteresis_loop_lands_on_the_exact_branches():

@@ -1,4 +1,4 @@
-"""snapmem's discrete model against the independent ODE shooting reference (snapmem.membrane_ode).
+"""snapmem's discrete model against the independent ODE shooting reference (snapmem.reference.membrane_ode).
 
 At fixed pressure, snapmem's answer must converge to the continuous one as N^-2, and the ODE
 solution's own error (default tolerances against much tighter ones) must be far below the
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from snapmem import build_scene, equilibrium
-from snapmem.continuation import ContinuationOptions, trace
-from snapmem.exact import balloon_limit_point, balloon_pressure
-from snapmem.materials import Gent
-from snapmem.membrane_ode import ODEOptions, PlateODE, SphereODE, TorusODE, e_hat
+from snapmem.continuation.tracer import ContinuationOptions, trace
+from snapmem.reference.exact import balloon_limit_point, balloon_pressure
+from snapmem.model.materials import Gent
+from snapmem.reference.membrane_ode import ODEOptions, PlateODE, SphereODE, TorusODE, e_hat
 
 TIGHT = ODEOptions(rtol=1e-13, atol=1e-15, pole_offset=1e-7)
 

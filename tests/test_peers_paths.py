@@ -1,4 +1,4 @@
-"""snapmem.paths: curves at values given in advance (load or one coordinate prescribed), and
+"""snapmem.reference.paths: curves at values given in advance (load or one coordinate prescribed), and
 Richardson's extrapolation; the lean path the peer comparisons (studies/peers.py,
 studies/sfepy_balloon.py) time against the ODE and SfePy."""
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from snapmem import SnapmemError, build_scene, exact, solve
-from snapmem.continuation import trace
-from snapmem.paths import coordinate_path, extrapolate, load_path
+from snapmem.continuation.tracer import trace
+from snapmem.reference.paths import coordinate_path, extrapolate, load_path
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 BALLOON = {"R": 1.0, "H": 0.01, "c1": 3e5, "c2": 3e4}             # SfePy's balloon

@@ -7,11 +7,11 @@ from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
 from snapmem import build_scene, equilibrium, solve
-from snapmem.materials import make_law
-from snapmem.meridian import disc, sphere, torus
-from snapmem.newton import STATUSES, NewtonOptions
-from snapmem.scene import Scene
-from snapmem.terms import Electric, PressureWork, Stretching
+from snapmem.model.materials import make_law
+from snapmem.model.meridian import disc, sphere, torus
+from snapmem.solvers.newton import STATUSES, NewtonOptions
+from snapmem.model.scene import Scene
+from snapmem.model.terms import Electric, PressureWork, Stretching
 
 SETTINGS = dict(deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 

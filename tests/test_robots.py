@@ -6,9 +6,9 @@ import pytest
 
 from snapmem import build_scene
 from snapmem.cli import main
-from snapmem.dynamics import Trajectory, simulate
-from snapmem.robots import ROBOTIC_SCENES, events, experiment, resting, run
-from snapmem.scenes import SCENES
+from snapmem.dynamics.driver import Trajectory, simulate
+from snapmem.catalog.robots import ROBOTIC_SCENES, events, experiment, resting, run
+from snapmem.catalog.scenes import SCENES
 
 
 def test_robotic_scenes_are_registered_and_build():
@@ -31,7 +31,7 @@ def test_torus_snap_settles_at_the_reference_outer_radius():
 
 def test_gripper_contact_force_rises_with_pressure_by_continuation():
     """Continuation through the free limit point onto the rod: force zero before contact, then rising."""
-    from snapmem.continuation import ContinuationOptions, trace
+    from snapmem.continuation.tracer import ContinuationOptions, trace
     scene = build_scene("gripper_rod", Rw=0.07, nodes=40)
     branch = trace(scene, "pressure", until={"pressure": 2000.0}, options=ContinuationOptions(max_steps=400))
     table = branch.table
@@ -107,7 +107,7 @@ def test_robot_curves_quick_pump_limit_points(tmp_path):
 
 
 def test_event_interpolation_is_exact_for_lines_and_parabolas():
-    from snapmem.robots import _crossing, _extremum
+    from snapmem.catalog.robots import _crossing, _extremum
     t = np.linspace(0.0, 1.0, 11)
     line = 2.0 - 3.0 * t
     assert _crossing(t, line, 0.65, falling=True) == pytest.approx(0.45, abs=1e-14)

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from snapmem import build_scene, equilibrium, exact, solve
-from snapmem.scene import Scene
-from snapmem.materials import Gent
-from snapmem.meridian import sphere
-from snapmem.terms import PressureWork, Stretching
+from snapmem.model.scene import Scene
+from snapmem.model.materials import Gent
+from snapmem.model.meridian import sphere
+from snapmem.model.terms import PressureWork, Stretching
 
 
 @pytest.mark.parametrize("E_hat", [0.0, 0.1538, 0.2308])

@@ -75,7 +75,7 @@ def test_fig9(tmp_path):
                                     {"case": "fat_torus", "parameters": '{"aspect_ratio": 0.95}'},
                                     {"case": "no_equilibrium", "parameters": '{"E_hat": 1.0}'}])
 def test_stress_cases_succeed_or_fail_clearly(design):
-    from snapmem import stress
+    from snapmem import stress_cases as stress
     row = stress.run_case(design)
     expected = "failed_clearly" if design["case"] == "no_equilibrium" else "ok"
     assert row["outcome"] == expected and row["message"]

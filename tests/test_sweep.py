@@ -13,7 +13,7 @@ import pytest
 
 from snapmem import SnapmemError
 from snapmem.cli import main
-from snapmem.sweep import Progress, design_key, parse_axis, read_rows, sweep
+from snapmem.sweeps.sweep import Progress, design_key, parse_axis, read_rows, sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 # 200 cheap designs of the real equilibrium job: balloon pressures below its limit point, 2 voltages
@@ -182,7 +182,7 @@ def readme_block(start):
 
 
 def test_readme_sweep_command(tmp_path, monkeypatch, capsys):
-    from snapmem import exact
+    from snapmem.reference import exact
     import shlex
     monkeypatch.chdir(tmp_path)
     argv = shlex.split(readme_block("snapmem sweep").strip())
@@ -195,7 +195,7 @@ def test_readme_sweep_command(tmp_path, monkeypatch, capsys):
 
 
 def test_readme_sweep_python(tmp_path):
-    code = readme_block("from snapmem.sweep")
+    code = readme_block("from snapmem.sweeps.sweep")
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
                          timeout=120)

@@ -1,0 +1,228 @@
+"""Compiled kernels of the membrane's assembly: invariants and their chain rule, the fused edge
+assembly, stretches, scatter, domain checks and the volume gradient. Arrays in, arrays out."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _invariant_derivatives(l1, l2):
+    """First and second derivatives of I1 and I2 in (lam1, lam2) at one edge (incompressible):
+    (i1_1, i1_2, i1_11, i1_12, i1_22, i2_1, i2_2, i2_11, i2_12, i2_22)."""
+    a2, b2 = l1 * l1, l2 * l2
+    inv = 1.0 / (a2 * b2)
+    return (2.0 * l1 - 2.0 * inv / l1, 2.0 * l2 - 2.0 * inv / l2,
+            2.0 + 6.0 * inv / a2, 4.0 * inv / (l1 * l2), 2.0 + 6.0 * inv / b2,
+            -2.0 / (a2 * l1) + 2.0 * l1 * b2, -2.0 / (b2 * l2) + 2.0 * a2 * l2,
+            6.0 / (a2 * a2) + 2.0 * b2, 4.0 * l1 * l2, 6.0 / (b2 * b2) + 2.0 * a2)
+
+
+@njit(cache=True, nogil=True)
+def invariant_chain(lam1, lam2, W1, W2, W11, W12, W22):
+    """Derivatives in (lam1, lam2) of W(I1, I2) from its derivatives in the invariants, per edge.
+
+    The chain rule of :class:`snapmem.model.materials.InvariantLaw` (which documents it), fused into one
+    pass over the edges. All arguments are arrays of shape (E,). Returns (w1, w2, w11, w12, w22).
+    """
+    n = lam1.size
+    w1 = np.empty(n)
+    w2 = np.empty(n)
+    w11 = np.empty(n)
+    w12 = np.empty(n)
+    w22 = np.empty(n)
+    for e in range(n):
+        i1_1, i1_2, i1_11, i1_12, i1_22, i2_1, i2_2, i2_11, i2_12, i2_22 = _invariant_derivatives(lam1[e], lam2[e])
+        A1, A2, A11, A12, A22 = W1[e], W2[e], W11[e], W12[e], W22[e]
+        w1[e] = A1 * i1_1 + A2 * i2_1
+        w2[e] = A1 * i1_2 + A2 * i2_2
+        w11[e] = A1 * i1_11 + A2 * i2_11 + A11 * i1_1 * i1_1 + 2.0 * A12 * i1_1 * i2_1 + A22 * i2_1 * i2_1
+        w12[e] = (A1 * i1_12 + A2 * i2_12 + A11 * i1_1 * i1_2
+                  + A12 * (i1_1 * i2_2 + i2_1 * i1_2) + A22 * i2_1 * i2_2)
+        w22[e] = A1 * i1_22 + A2 * i2_22 + A11 * i1_2 * i1_2 + 2.0 * A12 * i1_2 * i2_2 + A22 * i2_2 * i2_2
+    return w1, w2, w11, w12, w22
+
+
+@njit(cache=True, nogil=True)
+def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12, w22, pressure,
+                  band_index, n_band_entries, order):
+    """Gradient and band Hessian of the density terms (given their derivatives) plus the pressure work.
+
+    The same arithmetic as ``snapmem.model.scene._chain_rule`` and ``PressureWork.volume_local`` (which
+    document it and are the reference the tests compare with), fused with the scatter: one pass
+    over the edges and no E x 16 temporaries.
+
+    Parameters
+    ----------
+    q : (2N,) state; edges : (E, 2); inv_length, inv_mid_radius, weight : (E,)
+    w1 .. w22 : (E,) derivatives of the summed density in (lam1, lam2)
+    pressure : float, the pressure of the PressureWork term (0 if none)
+    band_index : (16 E,) entry-major flat positions in the band (the last slot is a trash slot)
+    order : 1 (gradient) or 2 (gradient and band)
+
+    Returns
+    -------
+    gradient : (2N,), band : (n_band_entries + 1,), volume : float, largest edge force entry : float
+    """
+    n_edges = edges.shape[0]
+    gradient = np.zeros(q.size)
+    band = np.zeros(n_band_entries + 1 if order >= 2 else 1)
+    volume = 0.0
+    force = 0.0                       # largest edge force entry (for the rounding floor)
+    c0 = np.pi / 3.0
+    H = np.empty(16)
+    for e in range(n_edges):
+        a, b = edges[e, 0], edges[e, 1]
+        ra, za, rb, zb = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
+        dr, dz = rb - ra, zb - za
+        l = np.sqrt(dr * dr + dz * dz)
+        inv_l = 1.0 / l
+        u = dr * inv_l * inv_length[e]
+        v = dz * inv_l * inv_length[e]
+        h = 0.5 * inv_mid_radius[e]
+        wt = weight[e]
+        a1, a2 = wt * w1[e], wt * w2[e]
+        s = ra * ra + ra * rb + rb * rb
+        volume += c0 * s * dz
+        c = -pressure * c0
+        sp = c * s
+        ga, gb = c * (2.0 * ra + rb), c * (ra + 2.0 * rb)
+        g0, g1, g2, g3 = a2 * h - a1 * u + ga * dz, -a1 * v - sp, a2 * h + a1 * u + gb * dz, a1 * v + sp
+        gradient[2 * a] += g0
+        gradient[2 * a + 1] += g1
+        gradient[2 * b] += g2
+        gradient[2 * b + 1] += g3
+        force = max(force, abs(g0), abs(g1), abs(g2), abs(g3))
+        if order < 2:
+            continue
+        aa = wt * w11[e]
+        bb = wt * w12[e] * h
+        cc = wt * w22[e] * h * h
+        d = a1 * inv_l * inv_l * inv_length[e] * inv_l
+        A_rr, A_rz, A_zz = d * dz * dz, -d * dr * dz, d * dr * dr
+        uu, uv, vv = aa * u * u, aa * u * v, aa * v * v
+        bu, bv = bb * u, bb * v
+        H[0] = uu - 2.0 * bu + cc + A_rr + 2.0 * c * dz          # (0, 0)
+        H[10] = uu + 2.0 * bu + cc + A_rr + 2.0 * c * dz         # (2, 2)
+        H[2] = H[8] = cc - uu - A_rr + c * dz                    # (0, 2)
+        H[5] = H[15] = vv + A_zz                                 # (1, 1), (3, 3)
+        H[7] = H[13] = -vv - A_zz                                # (1, 3)
+        H[1] = H[4] = uv - bv + A_rz - ga                        # (0, 1)
+        H[11] = H[14] = uv + bv + A_rz + gb                      # (2, 3)
+        H[3] = H[12] = bv - uv - A_rz + ga                       # (0, 3)
+        H[6] = H[9] = -uv - bv - A_rz - gb                       # (1, 2)
+        for k in range(16):
+            band[band_index[k * n_edges + e]] += H[k]
+    return gradient, band, volume, force
+
+
+@njit(cache=True, nogil=True)
+def linear_law_density(lam1, lam2, W1, W2):
+    """W = W1 (I1 - 3) + W2 (I2 - 3) with constant W1, W2 (neo-Hookean, Mooney-Rivlin) and its
+    derivatives in (lam1, lam2), in one pass: returns (w, w1, w2, w11, w12, w22), each (E,).
+
+    :func:`invariant_chain` with its second invariant derivatives zero (no temporaries: a time
+    step assembles this ~7 times).
+    """
+    n = lam1.size
+    w, w1, w2 = np.empty(n), np.empty(n), np.empty(n)
+    w11, w12, w22 = np.empty(n), np.empty(n), np.empty(n)
+    for e in range(n):
+        l1, l2 = lam1[e], lam2[e]
+        a2, b2 = l1 * l1, l2 * l2
+        w[e] = W1 * (a2 + b2 + 1.0 / (a2 * b2) - 3.0) + W2 * (1.0 / a2 + 1.0 / b2 + a2 * b2 - 3.0)
+        i1_1, i1_2, i1_11, i1_12, i1_22, i2_1, i2_2, i2_11, i2_12, i2_22 = _invariant_derivatives(l1, l2)
+        w1[e] = W1 * i1_1 + W2 * i2_1
+        w2[e] = W1 * i1_2 + W2 * i2_2
+        w11[e] = W1 * i1_11 + W2 * i2_11
+        w12[e] = W1 * i1_12 + W2 * i2_12
+        w22[e] = W1 * i1_22 + W2 * i2_22
+    return w, w1, w2, w11, w12, w22
+
+
+@njit(cache=True, nogil=True)
+def edge_kinematics(q, edges, inv_length, inv_mid_radius):
+    """End coordinates, edge vector, length and stretches of every edge in one pass.
+
+    The arithmetic of :meth:`snapmem.model.kinematics.EdgeKinematics.of` (which documents it).
+    Returns ra, za, rb, zb, dr, dz, l, lam1, lam2, each of shape (E,).
+    """
+    n = edges.shape[0]
+    ra, za, rb, zb = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    dr, dz, l, lam1, lam2 = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    for e in range(n):
+        a, b = edges[e, 0], edges[e, 1]
+        ra[e], za[e], rb[e], zb[e] = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
+        dr[e], dz[e] = rb[e] - ra[e], zb[e] - za[e]
+        l[e] = np.sqrt(dr[e] * dr[e] + dz[e] * dz[e])
+        lam1[e] = l[e] * inv_length[e]
+        lam2[e] = 0.5 * (ra[e] + rb[e]) * inv_mid_radius[e]
+    return ra, za, rb, zb, dr, dz, l, lam1, lam2
+
+
+@njit(cache=True, nogil=True)
+def edge_stretches(q, edges, inv_length, inv_mid_radius):
+    """(lam1, lam2) of every edge, each (E,): :func:`edge_kinematics`'s stretches alone."""
+    n = edges.shape[0]
+    lam1, lam2 = np.empty(n), np.empty(n)
+    for e in range(n):
+        a, b = edges[e, 0], edges[e, 1]
+        dr, dz = q[2 * b] - q[2 * a], q[2 * b + 1] - q[2 * a + 1]
+        lam1[e] = np.sqrt(dr * dr + dz * dz) * inv_length[e]
+        lam2[e] = 0.5 * (q[2 * a] + q[2 * b]) * inv_mid_radius[e]
+    return lam1, lam2
+
+
+@njit(cache=True, nogil=True)
+def scatter_add(target, index, values):
+    """target[index[i]] += values[i] for every i with index[i] >= 0 (repeats accumulate).
+
+    The node terms' few local entries into the band, gradient and border: numpy's bincount needs
+    a target-sized pass per call and np.add.at is slow; this is one pass over the entries.
+    """
+    for i in range(index.size):
+        j = index[i]
+        if j >= 0:
+            target[j] += values[i]
+
+
+@njit(cache=True, nogil=True)
+def state_check(q, radius_dofs):
+    """-1 if q is finite and every listed radius positive; -2 if q has NaN or inf; else the
+    first radius degree of freedom that is not positive (the scene's domain check, one pass)."""
+    for i in range(q.size):
+        if not np.isfinite(q[i]):
+            return -2
+    for k in range(radius_dofs.size):
+        if q[radius_dofs[k]] <= 0.0:
+            return radius_dofs[k]
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def volume_gradient(q, edges, n_dof):
+    """dV/dq of the swept volume V = sum_e (pi/3)(r_a^2 + r_a r_b + r_b^2)(z_b - z_a), shape (n_dof,)
+    [m^2]: the pressure's load derivative (the same formulas as PressureWork.volume_local)."""
+    g = np.zeros(n_dof)
+    c = np.pi / 3.0
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        ra, za, rb, zb = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
+        dz = zb - za
+        s = c * (ra * ra + ra * rb + rb * rb)
+        g[2 * a] += c * (2.0 * ra + rb) * dz
+        g[2 * a + 1] -= s
+        g[2 * b] += c * (ra + 2.0 * rb) * dz
+        g[2 * b + 1] += s
+    return g
+
+
+@njit(cache=True, nogil=True)
+def radius_max_step(q, dq, n_node_dofs, fraction):
+    """Largest alpha <= 1 with every positive radius r_i + alpha dr_i above (1 - fraction) r_i."""
+    alpha = 1.0
+    for i in range(0, n_node_dofs, 2):
+        if dq[i] < 0.0 and q[i] > 0.0:
+            alpha = min(alpha, fraction * q[i] / -dq[i])
+    return alpha

@@ -1,0 +1,254 @@
+"""Energy terms of a scene: each is a potential whose gradient is (minus) a force.
+
+Two kinds, distinguished by what they give the scene's assembly:
+
+* a **density term** gives an energy per unit reference volume W(lam1, lam2) with its
+  derivatives (a :class:`~snapmem.model.materials.Density`); the scene sums the densities of all such
+  terms and applies the chain rule to edge coordinates once (``edge_local``);
+* an **edge term** gives its own per-edge energy, gradient (E, 4) and Hessian (E, 4, 4).
+
+A term that depends on a load parameter (``pressure``, ``voltage``) names it in ``loads`` and
+gives the derivative of its gradient with respect to that load, for continuation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from snapmem.errors import check_real
+from snapmem.model.kinematics import EdgeKinematics
+from snapmem.model.materials import Density, Law
+
+
+class Term:
+    """Base class: ``loads`` are the names of the load parameters the term depends on."""
+
+    loads: tuple[str, ...] = ()
+
+
+class DensityTerm(Term):
+    """A term that is an energy density per unit reference volume, integrated over the membrane."""
+
+    def density(self, kin: EdgeKinematics, loads) -> Density:
+        raise NotImplementedError
+
+    def load_density(self, kin: EdgeKinematics, loads, name: str) -> Density:
+        """d(density)/d(load ``name``): only ``w1`` and ``w2`` are used."""
+        raise NotImplementedError
+
+    def admissible(self, kin: EdgeKinematics) -> np.ndarray:
+        return np.ones(kin.l.shape, dtype=bool)
+
+    @property
+    def restricts_domain(self) -> bool:
+        """Whether :meth:`admissible` can say no where stretches are positive; if not, the scene
+        skips it (positive radii and lengths already make every stretch positive)."""
+        return type(self).admissible is not DensityTerm.admissible
+
+
+class EdgeTerm(Term):
+    """A term that gives its energy directly per edge, in the edge's 4 coordinates."""
+
+    def edge_local(self, kin: EdgeKinematics, loads, order: int):
+        """Return (energy, gradient (E, 4) or None, Hessian (4, 4, E) or None) for order 0, 1, 2.
+
+        The Hessian is entry-major: ``hess[i, j]`` is the (E,) vector of entry (i, j) of every
+        edge's 4x4 block, so each entry is one contiguous array.
+        """
+        raise NotImplementedError
+
+    def load_gradient(self, kin: EdgeKinematics, loads, name: str) -> np.ndarray:
+        """d(gradient)/d(load ``name``), shape (E, 4)."""
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Stretching(DensityTerm):
+    """Hyperelastic stretching energy of the membrane with strain energy density ``law``."""
+
+    law: Law
+
+    def density(self, kin, loads):
+        return self.law.density(kin.lam1, kin.lam2)
+
+    def admissible(self, kin):
+        return self.law.admissible(kin.lam1, kin.lam2)
+
+    @property
+    def restricts_domain(self) -> bool:
+        """Whether the law's domain is smaller than positive stretches (Gent's lock)."""
+        return type(self.law).admissible is not Law.admissible
+
+
+@dataclass(frozen=True)
+class Electric(DensityTerm):
+    """Electrostatic free energy at fixed voltage, W_el = -(eps/2) (phi/H)^2 lam1^2 lam2^2.
+
+    The minus sign is the Legendre transform for a voltage held by a source: voltage softens
+    the membrane (MODEL.md section 2).
+
+    Attributes
+    ----------
+    permittivity : float
+        eps [F/m], > 0.
+    thickness : float
+        Reference thickness H [m], > 0.
+    """
+
+    permittivity: float
+    thickness: float
+    loads = ("voltage",)
+
+    def __post_init__(self):
+        check_real("eps", self.permittivity, minimum=0.0, min_inclusive=False)
+        check_real("H", self.thickness, minimum=0.0, min_inclusive=False)
+
+    def _density(self, kin, a: float) -> Density:
+        """Density of -a lam1^2 lam2^2 and its derivatives."""
+        l1, l2 = kin.lam1, kin.lam2
+        return Density(w=-a * (l1 * l2) ** 2, w1=-2.0 * a * l1 * l2 * l2, w2=-2.0 * a * l1 * l1 * l2,
+                       w11=-2.0 * a * l2 * l2, w12=-4.0 * a * l1 * l2, w22=-2.0 * a * l1 * l1)
+
+    def density(self, kin, loads):
+        phi = loads["voltage"]
+        return self._density(kin, 0.5 * self.permittivity * (phi / self.thickness) ** 2)
+
+    def load_density(self, kin, loads, name):
+        assert name == "voltage"
+        return self._density(kin, self.permittivity * loads["voltage"] / self.thickness ** 2)
+
+
+class PressureWork(EdgeTerm):
+    """Work of the pressure difference p (inside minus outside) [Pa]: energy -p V(q).
+
+    V is the exact volume swept by the polyline about the axis,
+    V = sum over edges of (pi/3)(r_a^2 + r_a r_b + r_b^2)(z_b - z_a) [m^3],
+    so the follower pressure force is a true gradient and its Jacobian is symmetric.
+    """
+
+    loads = ("pressure",)
+
+    @staticmethod
+    def volume_local(kin: EdgeKinematics, order: int, scale: float = 1.0):
+        """Per-edge volume, its gradient (E, 4) and entry-major Hessian (4, 4, E) (None below ``order``).
+
+        ``scale`` multiplies the gradient and Hessian (not the volume), so -p dV needs no copy.
+        """
+        c = np.pi / 3.0
+        ra, rb, dz = kin.ra, kin.rb, kin.dz
+        s = ra * ra + ra * rb + rb * rb
+        v = c * s * dz
+        if order < 1:
+            return v, None, None
+        c *= scale
+        s = c * s
+        ga, gb = c * (2.0 * ra + rb), c * (ra + 2.0 * rb)
+        grad = np.stack([ga * dz, -s, gb * dz, s], axis=1)
+        if order < 2:
+            return v, grad, None
+        hess = np.zeros((4, 4, v.size))
+        hess[0, 0] = hess[2, 2] = 2.0 * c * dz
+        hess[0, 2] = hess[2, 0] = c * dz
+        hess[0, 1] = hess[1, 0] = -ga
+        hess[0, 3] = hess[3, 0] = ga
+        hess[2, 1] = hess[1, 2] = -gb
+        hess[2, 3] = hess[3, 2] = gb
+        return v, grad, hess
+
+    def edge_local(self, kin, loads, order):
+        p = loads["pressure"]
+        v, g, h = self.volume_local(kin, order, scale=-p)
+        return -p * v.sum(), g, h
+
+    def load_gradient(self, kin, loads, name):
+        assert name == "pressure"
+        return -self.volume_local(kin, 1)[1]
+
+
+@dataclass(frozen=True)
+class RigidBody:
+    """A rigid body that moves along the axis: one degree of freedom, its height z.
+
+    A term that couples nodes to a body lists it in its ``bodies``; the scene appends one
+    degree of freedom per body after the 2N node coordinates.
+
+    Attributes
+    ----------
+    name : str
+        Name used in outputs (e.g. ``ball``).
+    z0 : float
+        Height of the body in the reference state [m].
+    mass : float
+        Mass [kg] (its inertia in dynamics).
+    """
+
+    name: str
+    z0: float
+    mass: float
+
+
+@dataclass
+class NodeLocal:
+    """What a node term gives the assembly, for N nodes and k = len(term.bodies).
+
+    Attributes
+    ----------
+    energy : float
+        [J]
+    nodes : ndarray (M,) of int or None
+        The nodes ``gradient`` and ``hessian`` rows belong to (None: all N, in order); a
+        barrier lists only the nodes within its width.
+    gradient : ndarray (M, 2 + k) or None
+        d(energy)/d(r_i, z_i, y_1..y_k) of each node's share [N].
+    hessian : ndarray (M, 2 + k, 2 + k) or None
+        Second derivatives of each node's share [N/m].
+    body_gradient, body_hessian : ndarray (k,), (k, k) or None
+        Parts that depend on the body coordinates y alone (a body's weight).
+    edges : ndarray (M_e,) of int or None
+        The edges ``edge_gradient`` and ``edge_hessian`` belong to (None: all E, in order).
+    edge_gradient, edge_hessian : ndarray (M_e, 4 + k), (4 + k, 4 + k, M_e) or None
+        Parts summed over edges instead (an edge's distance to a body), in each edge's local
+        coordinates (r_a, z_a, r_b, z_b) followed by y; the Hessian entry-major like edge terms'.
+    """
+
+    energy: float
+    nodes: np.ndarray | None = None
+    gradient: np.ndarray | None = None
+    hessian: np.ndarray | None = None
+    body_gradient: np.ndarray | None = None
+    body_hessian: np.ndarray | None = None
+    edges: np.ndarray | None = None
+    edge_gradient: np.ndarray | None = None
+    edge_hessian: np.ndarray | None = None
+
+
+class NodeTerm(Term):
+    """A term summed over nodes (a contact barrier): node i's local coordinates are
+    (r_i, z_i) followed by the heights y of the term's ``bodies``.
+
+    ``area`` passed in is each node's reference ring area 2 pi r_bar_i l_bar_i (a pole node:
+    its cap), shape (N,) [m^2].
+    """
+
+    bodies: tuple = ()
+
+    def node_local(self, x: np.ndarray, y: np.ndarray, area: np.ndarray, loads, order: int) -> NodeLocal:
+        raise NotImplementedError
+
+    def admissible(self, x: np.ndarray, y: np.ndarray) -> str | None:
+        """Why (x (N, 2), y (k,)) is outside this term's domain (a gap <= 0), or None."""
+        return None
+
+    def max_step(self, x, y, dx, dy) -> float:
+        """Largest fraction alpha <= 1 of the step (dx, dy) that keeps the state admissible."""
+        return 1.0
+
+
+#: Every energy term with a factory of one example instance for a membrane of thickness H,
+#: so that a single test checks the derivatives of every registered term.
+TERMS = {
+    "electric": lambda H: Electric(permittivity=2.0, thickness=H),
+    "pressure": lambda H: PressureWork(),
+}

@@ -1,0 +1,341 @@
+"""Newton's method on a scene's residual, and equilibria reached by loading from rest.
+
+Each iteration is one assembly (gradient and banded K at the trial point) and one band LU
+solve. The step is cut (i) to keep free radii positive (fraction to the boundary), (ii) by
+halving until the trial state is inside the model's domain (Gent lock, collapsed edges), and
+(iii) by halving until the residual norm falls (Armijo on |R|^2, for which the Newton
+direction is always a descent direction). The assembly at an accepted trial point is the next
+iteration's, so an iteration costs one assembly unless a step is cut.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Mapping
+
+import numpy as np
+
+from snapmem.errors import SnapmemError, check_array, check_int, check_real
+from snapmem.model.scene import Evaluation, Scene
+from snapmem.threads import single_threaded
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class NewtonOptions:
+    """Tolerances and limits of the Newton solver.
+
+    Attributes
+    ----------
+    tol : float
+        Converged when max |R| <= tol * scene.force_scale (default 1e-10).
+    max_iterations : int
+        Default 30.
+    max_cuts : int
+        Step halvings allowed in one iteration (default 30).
+    """
+
+    tol: float = 1e-10
+    max_iterations: int = 30
+    max_cuts: int = 30
+
+    def __post_init__(self):
+        check_real("tol", self.tol, minimum=0.0, min_inclusive=False)
+        check_int("max_iterations", self.max_iterations, minimum=1)
+        check_int("max_cuts", self.max_cuts, minimum=0)
+
+
+#: How a solve can end: NewtonReport.status is one of these words (``reason`` says more).
+STATUSES = {
+    "converged": "max |R| on the free degrees of freedom is below the tolerance",
+    "max_iterations": "the iteration limit was reached before convergence",
+    "step_too_small": "no step along the Newton direction reduces the residual (line search failed)",
+    "left_domain": "every trial step, however short, left the model's domain (material lock, "
+                   "non-positive radius, collapsed edge)",
+    "singular": "the tangent stiffness is singular",
+    "not_finite": "the residual is NaN or inf",
+    "no_equilibrium": "loading from rest cannot reach the load: a limit point or the end of the "
+                      "material's domain lies before it",
+    "failed": "any other failure (see reason)",
+}
+_REASON_STATUS = (("converged", "converged"), ("max iterations", "max_iterations"),
+                  ("line search failed", "step_too_small"), ("left the model's domain", "left_domain"),
+                  ("singular", "singular"), ("residual is not finite", "not_finite"),
+                  ("no equilibrium", "no_equilibrium"))
+
+
+@dataclass
+class NewtonReport:
+    """How a Newton solve went.
+
+    Attributes
+    ----------
+    converged : bool
+    iterations : int
+        Newton iterations (linear solves) taken.
+    residual_norm : float
+        max |R| over free degrees of freedom at the returned state [N].
+    reason : str
+        'converged', or why not ('max iterations', 'singular tangent', 'line search failed: ...').
+        ``status`` is the same as one word of :data:`STATUSES`.
+    step_cuts : int
+        Total step halvings.
+    history : list of float
+        Residual norm before each iteration.
+    """
+
+    converged: bool
+    iterations: int
+    residual_norm: float
+    reason: str
+    step_cuts: int = 0
+    history: list = field(default_factory=list)
+
+    @property
+    def status(self) -> str:
+        """One word of :data:`STATUSES` for this report's ``reason``."""
+        if self.converged:
+            return "converged"
+        for start, status in _REASON_STATUS:
+            if self.reason.startswith(start):
+                return status
+        return "failed"
+
+    def lines(self) -> list[str]:
+        return [f"converged: {self.converged}", f"iterations: {self.iterations}",
+                f"residual_norm: {self.residual_norm:.3e}", f"step_cuts: {self.step_cuts}",
+                f"reason: {self.reason}"]
+
+
+def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.ndarray, free: np.ndarray,
+           tol: float, options: NewtonOptions = NewtonOptions(),
+           inadmissible: Callable[[np.ndarray], str | None] = lambda q: None,
+           max_step: Callable[[np.ndarray, np.ndarray], float] = lambda q, dq: 1.0, merit: str = "residual"):
+    """Solve R(q) = 0 on the free degrees of freedom by damped Newton.
+
+    Parameters
+    ----------
+    residual_and_jacobian : callable
+        q -> Evaluation with ``residual`` (n_free,) and ``stiffness`` (BandedMatrix).
+    q0 : ndarray (n_dof,)
+        Starting state; fixed entries keep their values.
+    free : ndarray of int
+        Free degree of freedom for each band position.
+    tol : float
+        Absolute tolerance on max |R|.
+    merit : {'residual', 'energy'}
+        When a step is accepted: 'residual', Armijo on |R|^2 (for any equilibrium, stable or
+        not); 'energy', for a minimisation (a time step's incremental potential): when it lowers
+        the energy by the Armijo fraction of its slope, or halves max |R| (far fewer cuts: full
+        Newton steps in strongly nonlinear states often raise |R|^2 while lowering the energy).
+
+    Returns
+    -------
+    q : ndarray
+        Last accepted state (the start if nothing was accepted).
+    evaluation : Evaluation or None
+        Assembly at q (None if the start is outside the model's domain).
+    report : NewtonReport
+    """
+    q = np.array(q0, dtype=float)
+    why = inadmissible(q)
+    if why is not None:
+        return q, None, NewtonReport(False, 0, float("nan"),
+                                     f"left the model's domain: the starting state is outside it ({why})")
+    ev = residual_and_jacobian(q)
+    norm = _norm(ev.residual)
+    last_step = np.inf
+    report = NewtonReport(False, 0, norm, "max iterations")
+    for _ in range(options.max_iterations):
+        report.history.append(norm)
+        floor_tol = max(tol, ev.residual_floor)
+        if norm <= floor_tol or (norm <= 1e3 * floor_tol and last_step <= 1e-10 * np.abs(q).max()):
+            # converged; or the last Newton step was at the rounding of q and the residual is within
+            # 1e3 of the tolerance: the rounding floor of a stiff state (a law near its lock). A
+            # slowly converging singular problem takes steps far larger than that.
+            report.converged, report.reason = True, "converged"
+            break
+        if not math.isfinite(norm):
+            report.reason = "residual is not finite"
+            break
+        lu = ev.stiffness.lu()
+        if lu.singular:
+            report.reason = "singular tangent stiffness"
+            break
+        dx = lu.solve(-ev.residual)
+        dq = np.zeros_like(q)
+        dq[free] = dx
+        alpha = min(1.0, max_step(q, dq))
+        squared = float(ev.residual @ ev.residual)
+        slope = float(ev.residual @ dx) if merit == "energy" else 0.0
+        report.iterations += 1
+        outside = None
+        for _cut in range(options.max_cuts + 1):
+            trial = q + alpha * dq
+            outside = inadmissible(trial)
+            if outside is None:
+                ev_trial = residual_and_jacobian(trial)
+                if merit == "energy":
+                    trial_norm = _norm(ev_trial.residual)
+                    if np.isfinite(ev_trial.energy) and np.isfinite(trial_norm) and (
+                            ev_trial.energy <= ev.energy + 1e-4 * alpha * min(slope, 0.0) or trial_norm <= 0.5 * norm):
+                        break
+                else:
+                    trial_squared = float(ev_trial.residual @ ev_trial.residual)
+                    if math.isfinite(trial_squared) and trial_squared <= (1.0 - 1e-4 * alpha) * squared:
+                        break
+            alpha *= 0.5
+            report.step_cuts += 1
+        else:
+            what = "lowers the energy" if merit == "energy" else "reduces the residual"
+            report.reason = (f"line search failed: no step {what}" if outside is None else
+                             f"left the model's domain: every trial step was outside it ({outside})")
+            break
+        q, ev = trial, ev_trial
+        norm = _norm(ev.residual)
+        last_step = alpha * float(np.abs(dx).max()) if dx.size else 0.0
+    report.residual_norm = norm
+    if not report.converged and norm <= max(tol, ev.residual_floor):
+        report.converged, report.reason = True, "converged"
+    return q, ev, report
+
+
+def _norm(r: np.ndarray) -> float:
+    return float(np.abs(r).max()) if r.size else 0.0
+
+
+@dataclass
+class Equilibrium:
+    """An equilibrium state of a scene with its loads, solver report and scalar measures."""
+
+    scene: Scene
+    q: np.ndarray
+    loads: dict
+    report: NewtonReport
+    stiffness: object = None
+
+    @property
+    def converged(self) -> bool:
+        return self.report.converged
+
+    def measures(self) -> dict:
+        return self.scene.measures(self.q, self.loads)
+
+
+def solve(scene: Scene, loads: Mapping[str, float] | None = None, q0: np.ndarray | None = None,
+          options: NewtonOptions = NewtonOptions()) -> Equilibrium:
+    """Newton solve of the scene's equilibrium at ``loads`` from ``q0`` (default: its start guess)."""
+    loads = scene.resolve_loads(loads)
+    if q0 is None:
+        q0 = start_guess(scene, loads)
+    else:
+        q0 = check_array("q0", q0, scene.reference_state().shape)
+    q, ev, report = newton(lambda x: scene.evaluate(x, loads, order=2), q0, scene.free,
+                           options.tol * scene.force_scale, options, scene.inadmissible, scene.max_step)
+    return Equilibrium(scene, q, loads, report, None if ev is None else ev.stiffness)
+
+
+def start_guess(scene: Scene, loads: Mapping[str, float]) -> np.ndarray:
+    """A starting state for Newton: the scene's own guess if it has one, else the reference."""
+    return scene.reference_state() if scene.start_guess is None else scene.start_guess(loads)
+
+
+#: The order in which ``equilibrium`` applies loads (the paper inflates, then actuates).
+LOAD_ORDER = ("pressure", "voltage")
+
+
+@single_threaded
+def equilibrium(scene: Scene, loads: Mapping[str, float] | None = None,
+                options: NewtonOptions = NewtonOptions(), min_fraction_step: float = 1e-4) -> Equilibrium:
+    """The equilibrium reached by loading quasi-statically from rest to ``loads``.
+
+    Loads are applied one after the other (``LOAD_ORDER``: pressure, then voltage, then any
+    other), each in adaptive increments (halved on failure, grown when easy) with a secant
+    predictor. If the increments stall, the path has reached a limit point: the membrane snaps.
+    The branch is then traced past the fold (pseudo-arclength) to where the load is back at its
+    target; the report's reason says so ('snapped through at pressure = ...'). If that state is
+    not stable, or the branch never returns to the target, the result is not converged.
+    """
+    target = scene.resolve_loads(loads)
+    current = {k: 0.0 for k in target}
+    order = [k for k in LOAD_ORDER if k in target] + [k for k in target if k not in LOAD_ORDER]
+    if scene.start_guess is not None and any(target.values()):
+        # singular at rest (a flat plate): start just off rest, on the way to the target
+        current = {k: 1e-3 * v for k, v in target.items()}
+    last = solve(scene, current, q0=start_guess(scene, current), options=options)
+    if not last.converged:
+        last.report.reason = f"no equilibrium at the start of the load path: {last.report.reason}"
+        return last
+    iterations, notes = last.report.iterations, []
+    for name in order:
+        if target[name] == current[name]:
+            continue
+        last, its, note = _ramp(scene, last, current, name, target[name], options, min_fraction_step)
+        iterations += its
+        current = dict(last.loads)
+        if note:
+            notes.append(note)
+        if not last.converged:
+            break
+    last.report.iterations = iterations
+    if last.converged and notes:
+        last.report.reason = "converged; " + "; ".join(notes)
+    return last
+
+
+def _ramp(scene, start: Equilibrium, loads, name, value, options, min_fraction_step):
+    """Take load ``name`` from loads[name] to ``value`` by increments; snap through folds."""
+    a = loads[name]
+
+    def at(t):
+        return {**loads, name: a + t * (value - a)}
+
+    t, dt, last, previous, iterations = 0.0, 0.25, start, None, 0
+    while t < 1.0:
+        t_new = min(1.0, t + dt)
+        guess = last.q if previous is None else last.q + (last.q - previous[1]) * (t_new - t) / (t - previous[0])
+        if scene.inadmissible(guess) is not None:      # the secant overshot a lock: restart from the last state
+            guess = last.q
+        trial = solve(scene, at(t_new), q0=guess, options=options)
+        iterations += trial.report.iterations
+        if trial.converged:
+            previous, last, t = (t, last.q), trial, t_new
+            if trial.report.iterations <= 4:
+                dt *= 1.5
+            continue
+        dt *= 0.5
+        if dt < min_fraction_step:
+            snapped = _snap_by_tracing(scene, last, name, value)
+            if snapped is None:
+                last.report.converged = False
+                last.report.reason = (f"no equilibrium on the load path beyond {name} = {at(t)[name]:.6g} "
+                                      "(a limit point or the edge of the material's domain)")
+                return last, iterations, None
+            return snapped, iterations + snapped.report.iterations, f"snapped through at {name} = {at(t)[name]:.6g}"
+    return last, iterations, None
+
+
+def _snap_by_tracing(scene, last: Equilibrium, name, value):
+    """Trace past the fold from ``last`` to the next state with load ``name`` = value; None if none."""
+    from snapmem.continuation.tracer import ContinuationOptions, trace      # continuation builds on this module
+    try:
+        branch = trace(scene, name, until={name: value}, start=(last.q, last.loads),
+                       options=ContinuationOptions(max_steps=500, stability=True))
+    except SnapmemError as exc:
+        log.info("snap-through trace failed: %s", exc)
+        return None
+    except RuntimeError as exc:       # SolverError, or a root finder's "failed to converge" inside the trace
+        log.info("snap-through trace failed: %s", exc)
+        return None
+    end = branch.states[-1]
+    if not branch.status.startswith(f"{name} reached") or end.negative not in (0, None):
+        return None
+    q = scene.reference_state()
+    q[scene.free] = end.x
+    loads = {**last.loads, name: value}
+    eq = solve(scene, loads, q0=q)
+    eq.report.iterations += branch.stats["newton_iterations"]
+    return eq if eq.converged else None
