@@ -6,8 +6,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from snapmem import MooneyRivlin, PressureWork, Scene, Stretching, sphere
-from snapmem.dynamics.driver import (DynamicsOptions, PiecewiseLinear, Trajectory, lumped_masses, schedule, settle,
-                              simulate)
+from snapmem.dynamics import (DynamicsOptions, PiecewiseLinear, Trajectory, lumped_masses, schedule, settle,
+                      simulate)
 from snapmem.solvers.newton import solve
 
 R, H, C1, C2 = 10.0, 0.1, 0.4375, 0.0625

@@ -1,7 +1,7 @@
 """Hysteresis loops in one call: up, snap, down, snap back.
 
 Continuation traces a branch to its limit point; the load is pushed just past it and the damped
-dynamics (snapmem.dynamics.driver.settle) carries the membrane to rest on the far branch; continuation
+dynamics (snapmem.dynamics.settle.settle) carries the membrane to rest on the far branch; continuation
 goes on from that rest state up to a peak load and back down, to the limit point met on the way
 down; the load is pushed just below it and the dynamics snaps the membrane back; continuation
 takes it down to where it started. Everything is the same scene and the same energy terms.
@@ -64,7 +64,7 @@ def hysteresis(scene: Scene, control: str = "pressure", peak: float | None = Non
         parameter or 1, and one over the membrane's period L sqrt(rho / mu)). They decide how
         the membrane moves, not where it comes to rest.
     """
-    from snapmem.dynamics.driver import settle
+    from snapmem.dynamics.settle import settle
     if control not in ("pressure", "voltage", "E_hat"):
         raise SnapmemError(f"control = {control!r}: a hysteresis loop needs a load control: pressure, voltage or E_hat")
     push = check_real("push", push, minimum=0.0, min_inclusive=False, maximum=0.5)

@@ -1,0 +1,67 @@
+"""The recorded frames of a simulation (:class:`Trajectory`), and their .npz files."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Trajectory:
+    """Recorded frames of a simulation, and how the run went.
+
+    Attributes
+    ----------
+    data : dict of str -> ndarray
+        Per frame (T rows): ``t`` [s], ``r``, ``z`` (T, N) [m], ``v`` (T, n_dof) [m/s],
+        ``load_<name>``, ``volume`` [m^3], ``kinetic``, ``potential``, ``total`` [J], ``dt`` [s],
+        ``newton`` (iterations of the step), ``min_gap`` [m] (smallest contact gap over all
+        accepted steps since the previous frame; inf without contact), and for each contact
+        ``<body>_force`` [N] and ``<body>_gap`` [m], for each rigid body ``<name>_z`` [m] and
+        ``<name>_v`` [m/s].
+    meta : dict
+        Scene name and parameters, scheme, rho, damping, step and iteration counts, wall time.
+    """
+
+    data: dict
+    meta: dict = field(default_factory=dict)
+
+    def __getitem__(self, key) -> np.ndarray:
+        return self.data[key]
+
+    @property
+    def final_q(self) -> np.ndarray:
+        return self.data["q"][-1]
+
+    def save(self, path):
+        """Write a compressed .npz that loads without pickle (meta as a JSON string); atomically, so
+        an interrupted save leaves no half file. Returns the path written ('.npz' appended if missing)."""
+        from snapmem.io.results import write_npz
+        arrays = {k: np.asarray(v) for k, v in self.data.items()}
+        arrays["meta"] = np.array(json.dumps(self.meta, default=_json_default))
+        return write_npz(path, **arrays)
+
+    @classmethod
+    def load(cls, path) -> "Trajectory":
+        from snapmem.errors import read_npz                     # corrupt or truncated: one clear error
+        data = read_npz(path, "trajectory file", required=("t", "r", "z"))
+        meta = json.loads(str(data.pop("meta"))) if "meta" in data else {}
+        return cls(data, meta)
+
+    def snap_time(self, key: str = "volume") -> float:
+        """Time of the fastest change of ``key`` (a snap-through or snap-back) [s]."""
+        t, y = self.data["t"], self.data[key]
+        rate = np.abs(np.diff(y) / np.maximum(np.diff(t), 1e-300))
+        i = int(np.argmax(rate))
+        return float(0.5 * (t[i] + t[i + 1]))
+
+
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)
+
