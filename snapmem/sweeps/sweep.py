@@ -18,6 +18,7 @@ status: ``converged``, ``no_equilibrium``, ...; see :data:`snapmem.solvers.newto
 finished design is ``ok``. Non-finite numbers are written as empty cells, never as numbers.
 
 Jobs for the command line are registered by name in :data:`JOBS` (``snapmem sweep --job NAME``).
+
 Modules: :mod:`snapmem.sweeps.grid` (designs, keys, axis parsing), :mod:`snapmem.sweeps.journal`
 (the row file and its metadata), :mod:`snapmem.sweeps.runners` (process pool, isolation, Dask);
 this module has :func:`sweep`, its progress line and the named jobs, and re-exports the names
