@@ -9,14 +9,21 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from snapmem.errors import SnapmemError, SolverError
+from snapmem.catalog.loads import loads_needed
 from snapmem.catalog.scenes import SCENES, get_spec
+from snapmem.continuation import CONTROLS
+from snapmem.dynamics import SCHEMES
+from snapmem.errors import SnapmemError, SolverError
+from snapmem.io.progress import Progress, bar
+from snapmem.sweeps.grid import parse_axis, parse_value
+
+#: The controls that move a load (fold curves and hysteresis loops; not volume).
+LOAD_CONTROLS = tuple(control for control in CONTROLS if control != "volume")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -70,51 +77,12 @@ def parse_until(pairs: list[str]) -> dict:
     return out
 
 
-def parse_values(text: str) -> tuple[str, list[float]]:
-    """``NAME=START:STOP:COUNT`` or ``NAME=v1,v2,...`` -> (name, values)."""
-    name, sep, spec = text.partition("=")
-    if not sep or not name.strip() or not spec.strip():
-        raise SnapmemError(f"--vary {text!r}: must be NAME=START:STOP:COUNT or NAME=v1,v2,...")
-    try:
-        if ":" in spec:
-            start, stop, count = spec.split(":")
-            count = int(count)
-            if count < 1:
-                raise ValueError
-            values = list(np.linspace(float(start), float(stop), count))
-        else:
-            values = [float(v) for v in spec.split(",")]
-    except ValueError:
-        raise SnapmemError(f"--vary {text!r}: must be NAME=START:STOP:COUNT (COUNT >= 1) or NAME=v1,v2,...") from None
-    return name.strip(), values
-
-
-class Progress:
-    """A one-line progress display on stderr, redrawn at most 5 times a second (only on a terminal)."""
-
-    def __init__(self, enabled: bool | None = None):
-        self.enabled = sys.stderr.isatty() if enabled is None else enabled
-        self.last = 0.0
-        self.start = time.perf_counter()
-
-    def show(self, text: str, force: bool = False):
-        now = time.perf_counter()
-        if self.enabled and (force or now - self.last > 0.2):
-            self.last = now
-            print(f"\r{text} [{now - self.start:.1f} s]\033[K", end="", file=sys.stderr, flush=True)
-
-    def done(self):
-        if self.enabled:
-            print(file=sys.stderr)
-
-
 def cmd_trace(args) -> int:
     from snapmem.continuation.tracer import ContinuationOptions, load_points, trace
     from snapmem.io.results import write_table
     params = parse_sets(args.set)
     control = args.control
-    with_loads = ("voltage",) if control in ("voltage", "E_hat") else ()
-    scene = get_spec(args.scene).build(with_loads, **params)
+    scene = get_spec(args.scene).build(loads_needed(control), **params)
     until = parse_until(args.until) if args.until else {"stretch_max": 4.0}
     options = ContinuationOptions(max_steps=args.max_steps, stop_at_first_limit=args.stop_at_first_limit,
                                   save_at=tuple(float(v) for v in args.save_at or ()))
@@ -132,15 +100,16 @@ def cmd_trace(args) -> int:
         elif saved["meta"]["control"] == "volume":
             loads["pressure"] = float(saved["x"][index][-1])
         start = (saved["q"][index], loads)
-    bar = Progress()
+    display = Progress(file_interval=None)
     counter = {"n": 0}
 
     def progress(point, row):
         counter["n"] += 1
-        bar.show(f"trace {scene.name}: step {counter['n']}  {control} = {point.lam:.6g}")
+        display.show(f"trace {scene.name}: step {counter['n']}  {control} = {point.lam:.6g} "
+                     f"[{display.elapsed:.1f} s]")
 
     branch = trace(scene, control, until=until, options=options, start=start, progress=progress)
-    bar.done()
+    display.close()
     meta = {"command": "trace", "scene": scene.name, "parameters": scene.parameters, "control": control,
             "until": until, "status": branch.status, "stats": branch.stats}
     if args.out:
@@ -169,14 +138,16 @@ def cmd_fold(args) -> int:
     from snapmem.continuation.tracer import fold_curve
     from snapmem.io.results import write_table
     params = parse_sets(args.set)
-    name, values = parse_values(args.vary)
+    name, values = parse_axis(args.vary, option="--vary", number=True)
+    values = [float(v) for v in values]
     spec = get_spec(args.scene)
-    with_loads = ("voltage",) if args.control in ("voltage", "E_hat") or name in ("E_hat", "voltage") else ()
+    with_loads = loads_needed(args.control, name)
     spec.resolve(**{**params, name: values[0]})          # unknown names fail before any work
-    bar = Progress()
+    display = Progress(file_interval=None)
     table = fold_curve(lambda v: spec.build(with_loads, **{**params, name: v}), values, args.control,
-                       progress=lambda i, n: bar.show(f"fold {args.scene}: {i}/{n} values of {name}"))
-    bar.done()
+                       progress=lambda i, n: display.show(f"fold {args.scene}: {i}/{n} values of {name} "
+                                                          f"[{display.elapsed:.1f} s]"))
+    display.close()
     table = table.rename(columns={"value": name, "limit": f"{args.control}_limit"})
     meta = {"command": "fold", "scene": args.scene, "parameters": params, "vary": name, "control": args.control}
     if args.out:
@@ -190,7 +161,7 @@ def cmd_fold(args) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from snapmem.sweeps.sweep import make_job, parse_axis, parse_value, sweep
+    from snapmem.sweeps.sweep import make_job, sweep
     fixed = parse_sets(args.set)
     if args.pressure is not None:
         fixed["pressure"] = args.pressure
@@ -210,29 +181,8 @@ def cmd_sweep(args) -> int:
     return 0
 
 
-def _progress_bar(stream=sys.stderr, width=40):
-    """A one-line progress display (simulated time, wall time) on ``stream``, redrawn at most 10x a second."""
-    import time
-    start = time.perf_counter()
-    state = {"last": -1.0}
-
-    def show(t, t_end):
-        now = time.perf_counter()
-        if now - state["last"] < 0.1 and t < t_end:
-            return
-        state["last"] = now
-        frac = min(1.0, t / t_end) if t_end > 0 else 1.0
-        bar = "#" * int(width * frac) + "-" * (width - int(width * frac))
-        stream.write(f"\r[{bar}] t = {t:9.4f} / {t_end:g} s  wall {now - start:6.1f} s")
-        if t >= t_end:
-            stream.write("\n")
-        stream.flush()
-    return show
-
-
 def cmd_simulate(args) -> int:
     import dataclasses
-    import numpy as np
     from snapmem.catalog.robots import EXPERIMENTS, events, experiment
     from snapmem.dynamics.driver import simulate
     params = parse_sets(args.set)
@@ -242,9 +192,18 @@ def cmd_simulate(args) -> int:
     if args.frames:
         changes["save_interval"] = t_end / args.frames
     options = dataclasses.replace(ex.options, **changes)
-    traj = simulate(ex.scene, ex.loads, t_end, rho=ex.rho, damping=ex.damping, q0=ex.q0, v0=ex.v0,
-                    options=options, damp_bodies=ex.damp_bodies,
-                    progress=None if args.quiet else _progress_bar())
+    display = Progress(enabled=not args.quiet)
+
+    def progress(t, t_end):
+        done = min(1.0, t / t_end) if t_end > 0 else 1.0
+        display.show(f"[{bar(done, 40)}] t = {t:9.4f} / {t_end:g} s  wall {display.elapsed:6.1f} s",
+                     force=t >= t_end)
+
+    try:
+        traj = simulate(ex.scene, ex.loads, t_end, rho=ex.rho, damping=ex.damping, q0=ex.q0, v0=ex.v0,
+                        options=options, damp_bodies=ex.damp_bodies, progress=None if args.quiet else progress)
+    finally:
+        display.close()
     meta = traj.meta
     wall = meta["wall_time"]
     lines = {"scene": args.scene, "status": meta["status"], "scheme": meta["scheme"], "t_end": meta["t_end"],
@@ -277,8 +236,7 @@ def cmd_hysteresis(args) -> int:
     from snapmem.continuation.hysteresis import hysteresis
     from snapmem.io.results import write_table
     params = parse_sets(args.set)
-    with_loads = ("voltage",) if args.control in ("voltage", "E_hat") else ()
-    scene = get_spec(args.scene).build(with_loads, **params)
+    scene = get_spec(args.scene).build(loads_needed(args.control), **params)
     loop = hysteresis(scene, args.control, peak=args.peak)
     meta = {"command": "hysteresis", "scene": scene.name, "parameters": scene.parameters, "control": args.control,
             "status": loop.status}
@@ -294,7 +252,7 @@ def cmd_hysteresis(args) -> int:
     for _, row in loop.snaps.iterrows():
         print(f"{row['event']}: at {args.control} = {row['control_at_limit']:.8g}, settled at "
               f"{row['control_settled']:.8g}, u_max {row['u_max_before']:.6g} -> {row['u_max_after']:.6g}")
-    return 0 if loop.status == "loop closed" else 1
+    return 0 if loop.closed else 1
 
 
 def cmd_bench(args) -> int:
@@ -340,7 +298,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("trace", help="trace an equilibrium branch through its limit points")
     p.add_argument("scene")
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
-    p.add_argument("--control", choices=["pressure", "voltage", "E_hat", "volume"], default="pressure")
+    p.add_argument("--control", choices=CONTROLS, default="pressure")
     p.add_argument("--until", action="append", metavar="NAME=VALUE",
                    help="stop when an output reaches a value (default stretch_max=4)")
     p.add_argument("--out", metavar="BRANCH.csv", help="branch table (+ .json parameters, .npz states)")
@@ -360,7 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--vary", required=True, metavar="NAME=START:STOP:COUNT",
                    help="scene parameter to vary, as a range or a list v1,v2,...")
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
-    p.add_argument("--control", choices=["pressure", "voltage", "E_hat"], default="pressure")
+    p.add_argument("--control", choices=LOAD_CONTROLS, default="pressure")
     p.add_argument("--out", metavar="FOLD.csv")
     p.add_argument("--plot", metavar="FIG.png")
     p.set_defaults(func=cmd_fold)
@@ -368,14 +326,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("hysteresis", help="up, snap, down, snap back: a hysteresis loop in one call")
     p.add_argument("scene")
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
-    p.add_argument("--control", choices=["pressure", "voltage", "E_hat"], default="pressure")
+    p.add_argument("--control", choices=LOAD_CONTROLS, default="pressure")
     p.add_argument("--peak", type=float, help="control value reached after the snap (default 1.05 x the limit)")
     p.add_argument("--out", metavar="LOOP.csv", help="the loop's branches (+ LOOP_snaps.csv)")
     p.add_argument("--plot", metavar="FIG.png")
     p.set_defaults(func=cmd_hysteresis)
 
     p = sub.add_parser("bench", help="benchmarks: Newton against the banded solve, whole jobs, designs per second")
-    p.add_argument("--quick", action="store_true", help="small sizes (about a minute)")
+    p.add_argument("--quick", action="store_true", help="small sizes, for a quick check")
     p.add_argument("--out", default="results/benchmark.csv", metavar="BENCH.csv")
     p.set_defaults(func=cmd_bench)
 
@@ -383,7 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene")
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
     p.add_argument("--t-end", type=float, help="end time [s] (default: the scene's)")
-    p.add_argument("--scheme", choices=["midpoint", "bdf2", "euler"], help="time integrator")
+    p.add_argument("--scheme", choices=SCHEMES, help="time integrator")
     p.add_argument("--tol", type=float, help="local error tolerance per step (fraction of the size)")
     p.add_argument("--frames", type=int, default=0, help="save about this many frames (default: every step)")
     p.add_argument("--out", metavar="TRAJ.npz", help="save the trajectory (compressed, no pickle)")

@@ -3,6 +3,8 @@
 import importlib.util
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from snapmem.reference import exact
@@ -40,4 +42,9 @@ def test_balloon_curve_reports_the_limit_pressure_of_the_mesh():
 
 def test_bench_newton_quick_runs(tmp_path):
     table = _study("bench_newton").main(["--quick", "--out", str(tmp_path / "bn.csv")])
-    assert set(table["nodes"]) == {101, 1001} and (table["ratio"] > 0).all()
+    assert set(zip(table["scene"], table["nodes"])) == {(s, n) for s in ("balloon", "torus") for n in (101, 1001)}
+    assert np.allclose(table["ratio"], table["iteration_s"] / table["solve_s"], rtol=1e-12)
+    assert np.allclose(table["ratio_own"], table["iteration_s"] / table["own_solve_s"], rtol=1e-12)
+    assert np.allclose(table["iteration_us_per_dof"], 1e6 * table["iteration_s"] / table["dofs"], rtol=1e-12)
+    saved = pd.read_csv(tmp_path / "bn.csv")                     # the file holds what was measured
+    assert list(saved.columns) == list(table.columns) and np.allclose(saved["ratio"], table["ratio"], rtol=1e-12)

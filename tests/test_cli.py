@@ -26,3 +26,81 @@ def test_scenes_lists_parameters_with_units(capsys):
     out = capsys.readouterr().out
     assert "balloon:" in out and "torus:" in out and "plate:" in out
     assert "Rs = 2.0 [m]" in out and "nodes = 101" in out
+
+
+class _Stream:
+    """A text stream that says whether it is a terminal."""
+
+    def __init__(self, tty):
+        self.tty, self.parts = tty, []
+
+    def isatty(self):
+        return self.tty
+
+    def write(self, text):
+        self.parts.append(text)
+
+    def flush(self):
+        pass
+
+
+@pytest.mark.parametrize("tty", [True, False])
+def test_progress_redraws_on_a_terminal_and_writes_lines_to_a_file(tty):
+    from snapmem.io.progress import Progress
+    stream = _Stream(tty)
+    display = Progress(stream=stream, interval=0.0, file_interval=0.0)
+    display.show("step 1")
+    display.show("step 2")
+    display.close()
+    assert "".join(stream.parts) == ("\rstep 1\033[K\rstep 2\033[K\n" if tty else "step 1\nstep 2\n")
+
+
+def test_progress_shows_the_last_line_on_close_and_nothing_where_not_wanted():
+    from snapmem.io.progress import Progress, bar, duration
+    stream = _Stream(False)
+    display = Progress(stream=stream, file_interval=1e9)           # no line is due before close
+    display.show("a")
+    display.show("b")
+    display.close()
+    assert stream.parts == ["b\n"]
+    quiet = _Stream(False)
+    display = Progress(stream=quiet, file_interval=None)           # a terminal-only display on a file
+    display.show("a", force=True)
+    display.close()
+    assert quiet.parts == []
+    assert bar(0.5, 4) == "##--" and bar(2.0, 3) == "###" and duration(3725) == "1h02m" and duration(61) == "1m01s"
+
+
+def test_loads_needed_for_voltage_controls_and_parameters():
+    from snapmem.catalog.loads import loads_needed
+    assert loads_needed("voltage") == loads_needed("E_hat") == loads_needed("pressure", "E_hat") == ("voltage",)
+    assert loads_needed("pressure") == loads_needed("volume", "aspect_ratio") == ()
+
+
+@pytest.mark.parametrize("vary, words", [
+    ("E_hat=0:1", ["--vary 'E_hat=0:1'", "NAME=START:STOP:COUNT", "NAME=v1,v2,..."]),
+    ("E_hat=0:1:0", ["E_hat COUNT = 0", ">= 1"]),
+    ("E_hat=0.1,soon", ["E_hat = 'soon'", "must be a number"]),
+    ("E_hat", ["--vary 'E_hat'", "NAME=START:STOP:COUNT"]),
+])
+def test_fold_vary_errors_name_the_value_and_what_is_allowed(vary, words, capsys):
+    assert main(["fold", "torus", "--vary", vary]) == 2
+    err = capsys.readouterr().err
+    assert all(w in err for w in words), err
+
+
+def test_vary_and_grid_share_one_parser():
+    from snapmem.sweeps.grid import parse_axis
+    assert parse_axis("E_hat=0:0.2:3", option="--vary", number=True) == ("E_hat", [0.0, 0.1, 0.2])
+    assert parse_axis("nodes=5,7", option="--vary", number=True) == ("nodes", [5, 7])
+
+
+def test_hysteresis_exit_code_follows_whether_the_loop_closed(monkeypatch, capsys):
+    import pandas as pd
+    from snapmem.continuation import hysteresis as module
+    snaps = pd.DataFrame(columns=["event", "control_at_limit", "control_settled", "u_max_before", "u_max_after"])
+    for closed, code in ((True, 0), (False, 1)):
+        monkeypatch.setattr(module, "hysteresis", lambda scene, control, peak=None, closed=closed:
+                            module.Hysteresis(pd.DataFrame(), snaps, "loop closed", closed=closed))
+        assert main(["hysteresis", "balloon", "--set", "nodes=11"]) == code
+    assert capsys.readouterr().out.count("status: loop closed") == 2

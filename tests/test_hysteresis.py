@@ -9,7 +9,7 @@ from snapmem.continuation.hysteresis import hysteresis
 
 def test_balloon_hysteresis_loop_lands_on_the_exact_branches():
     loop = hysteresis(build_scene("balloon", nodes=41))
-    assert loop.status == "loop closed"
+    assert loop.status == "loop closed" and loop.closed
     assert list(loop.table["segment"].unique()) == ["loading", "after snap", "unloading", "after snap back"]
     snap, back = loop.snaps.iloc[0], loop.snaps.iloc[1]
     (lam_max, p_max), (lam_min, p_min) = exact.balloon_extrema()[:2]

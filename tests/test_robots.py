@@ -16,7 +16,10 @@ def test_robotic_scenes_are_registered_and_build():
         assert name in SCENES
         ex = experiment(name, nodes=21)
         assert ex.scene.inadmissible(ex.scene.reference_state() if ex.q0 is None else ex.q0) is None
-        assert ex.t_end > 0 and ex.rho > 0
+        defaults = {p.name: p.default for p in SCENES[name].parameters}
+        assert (ex.t_end, ex.rho, ex.damping) == (defaults["t_end"], defaults["rho"], defaults["xi"])
+    paper = {p.name: p.default for p in SCENES["torus_snap"].parameters}      # the C++ code's scene
+    assert (paper["rho"], paper["xi"], paper["t_end"], paper["nodes"]) == (100.0, 1.0, 100.0, 200)
 
 
 def test_torus_snap_settles_at_the_reference_outer_radius():

@@ -37,11 +37,16 @@ class Hysteresis:
         point, the load it settled at, and the measures before and after (``u_max``, ``volume``,
         the scene's probes), the dynamic ``duration`` [s] and whether it came ``at_rest``.
     status : str
+        'loop closed', or what stopped the loop (no limit point on a branch, a snap that did not
+        come to rest).
+    closed : bool
+        Whether the loop closed: both snaps happened and the unloading came back to the start.
     """
 
     table: pd.DataFrame
     snaps: pd.DataFrame
     status: str
+    closed: bool = False
 
 
 @single_threaded
@@ -75,9 +80,6 @@ def hysteresis(scene: Scene, control: str = "pressure", peak: float | None = Non
     damping = check_real("damping", damping if damping is not None else 1.0 / period, minimum=0.0, min_inclusive=False)
     up = replace(options, stop_at_first_limit=True, direction=1)
     segments, snaps = [], []
-
-    def state(branch, point):
-        return pb.state(point.x, point.lam)
 
     def snap(event, branch, sign):
         lp = next(p for p in branch.states if p.kind == "LP")
@@ -118,7 +120,7 @@ def hysteresis(scene: Scene, control: str = "pressure", peak: float | None = Non
     home = trace(scene, control, until={control: start}, start=(back.q, back.loads),
                  options=replace(options, direction=-1))
     segments.append(home.table.assign(segment="after snap back"))
-    return Hysteresis(_join(segments), pd.DataFrame(snaps), "loop closed")
+    return Hysteresis(_join(segments), pd.DataFrame(snaps), "loop closed", closed=True)
 
 
 def _join(segments) -> pd.DataFrame:

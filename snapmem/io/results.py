@@ -48,7 +48,3 @@ def write_npz(path, **arrays) -> Path:
         tmp.unlink(missing_ok=True)                    # only left if the write did not finish
     return path
 
-
-def read_meta(path) -> dict:
-    """The JSON sidecar of a table written by :func:`write_table`."""
-    return json.loads(Path(str(path) + ".json").read_text())

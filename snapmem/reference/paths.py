@@ -16,8 +16,8 @@ as good as the mesh: :func:`extrapolate` combines the same curve on two or three
 whose error falls faster than N^-2 (Richardson).
 
 A path does band solves and vector operations only (no dense blocks, no eigenvalues), so it does
-not run under :func:`snapmem.threads.single_threaded` (whose first entry alone costs 0.3 ms):
-one path of 30 points on 21 to 3000 nodes takes 4 to 50 ms here, the same either way.
+not run under :func:`snapmem.threads.single_threaded`: it runs as fast without it (timings:
+docs/performance.md).
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ from snapmem.model.scene import Evaluation, Scene
 
 
 @dataclass
-class Path:
-    """States of a scene at the values of a path, in order.
+class LoadPath:
+    """States of a scene at the values of a load or coordinate path, in order.
 
     Attributes
     ----------
@@ -114,7 +114,7 @@ class _Follower:
 
 
 def load_path(scene: Scene, values, load: str = "pressure", q0: np.ndarray | None = None,
-              options: NewtonOptions = NewtonOptions()) -> Path:
+              options: NewtonOptions = NewtonOptions()) -> LoadPath:
     """Equilibria of ``scene`` at load = each of ``values`` (in order), one Newton solve each.
 
     The first solve starts from ``q0`` (default: the scene's start guess at that load), each next
@@ -141,11 +141,11 @@ def load_path(scene: Scene, values, load: str = "pressure", q0: np.ndarray | Non
 
     follow = _Follower(solve_at, [], load, options)
     states = [follow.reach(value) for value in values]
-    return Path(np.array(states), values.copy(), values.copy(), follow.iterations)
+    return LoadPath(np.array(states), values.copy(), values.copy(), follow.iterations)
 
 
 def coordinate_path(scene: Scene, dof: int, values, start: tuple, load: str = "pressure",
-                    options: NewtonOptions = NewtonOptions()) -> Path:
+                    options: NewtonOptions = NewtonOptions()) -> LoadPath:
     """Equilibria with coordinate q[dof] = each of ``values`` (in order), the load unknown.
 
     The unknowns are the free coordinates and the load; the equations R(q, load) = 0 on every
@@ -217,7 +217,7 @@ def coordinate_path(scene: Scene, dof: int, values, start: tuple, load: str = "p
     state = np.append(q, loads[load])
     follow = _Follower(solve_at, [(state[dof], state)], f"q[{dof}]", options, first)
     states = np.array([follow.reach(value) for value in values])
-    return Path(states[:, :n_dof], states[:, -1], values.copy(), follow.iterations)
+    return LoadPath(states[:, :n_dof], states[:, -1], values.copy(), follow.iterations)
 
 
 class _Bordered:
