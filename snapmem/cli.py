@@ -46,7 +46,7 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_equilibrium(args) -> int:
-    from snapmem.solvers.newton import equilibrium
+    from snapmem.statics import equilibrium
     params = parse_sets(args.set)
     if args.pressure is not None:
         params["pressure"] = args.pressure
@@ -109,7 +109,7 @@ class Progress:
 
 
 def cmd_trace(args) -> int:
-    from snapmem.continuation.tracer import ContinuationOptions, load_points, trace
+    from snapmem.continuation import ContinuationOptions, load_points, trace
     from snapmem.io.results import write_table
     params = parse_sets(args.set)
     control = args.control
@@ -166,7 +166,7 @@ def cmd_trace(args) -> int:
 
 
 def cmd_fold(args) -> int:
-    from snapmem.continuation.tracer import fold_curve
+    from snapmem.continuation.folds import fold_curve
     from snapmem.io.results import write_table
     params = parse_sets(args.set)
     name, values = parse_values(args.vary)
