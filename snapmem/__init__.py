@@ -18,7 +18,8 @@ _moved.install()                 # the flat module paths of snapmem 0.1 keep wor
 from snapmem.errors import SnapmemError, SolverError
 from snapmem.model.materials import Gent, Law, InvariantLaw, MooneyRivlin, NeoHookean, Yeoh, LAWS, make_law
 from snapmem.model.meridian import Meridian, disc, sphere, torus
-from snapmem.solvers.newton import Equilibrium, NewtonOptions, NewtonReport, equilibrium, solve
+from snapmem.solvers.newton import Equilibrium, NewtonOptions, NewtonReport, solve
+from snapmem.statics import equilibrium
 from snapmem.model.scene import Scene
 from snapmem.catalog.scenes import SCENES, Parameter, SceneSpec, build_scene, register
 from snapmem.model.terms import Electric, PressureWork, Stretching

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 from scipy.linalg.lapack import dgbsv
 
-from snapmem.continuation.tracer import fold_curve, trace
+from snapmem.continuation import fold_curve, trace
 from snapmem.catalog.scenes import build_scene
 
 log = logging.getLogger(__name__)

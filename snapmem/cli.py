@@ -53,7 +53,7 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_equilibrium(args) -> int:
-    from snapmem.solvers.newton import equilibrium
+    from snapmem.statics import equilibrium
     params = parse_sets(args.set)
     if args.pressure is not None:
         params["pressure"] = args.pressure
@@ -78,7 +78,7 @@ def parse_until(pairs: list[str]) -> dict:
 
 
 def cmd_trace(args) -> int:
-    from snapmem.continuation.tracer import ContinuationOptions, load_points, trace
+    from snapmem.continuation import ContinuationOptions, load_points, trace
     from snapmem.io.results import write_table
     params = parse_sets(args.set)
     control = args.control
@@ -135,7 +135,7 @@ def cmd_trace(args) -> int:
 
 
 def cmd_fold(args) -> int:
-    from snapmem.continuation.tracer import fold_curve
+    from snapmem.continuation.folds import fold_curve
     from snapmem.io.results import write_table
     params = parse_sets(args.set)
     name, values = parse_axis(args.vary, option="--vary", number=True)

@@ -20,7 +20,7 @@ import numpy as np
 import snapmem.reference.exact as exact
 from snapmem.continuation.tracer import ContinuationOptions, trace
 from snapmem.errors import SnapmemError, SolverError
-from snapmem.solvers.newton import equilibrium
+from snapmem.statics import equilibrium
 from snapmem.catalog.scenes import build_scene
 
 

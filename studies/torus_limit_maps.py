@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 
 from snapmem import SolverError, build_scene
-from snapmem.continuation.tracer import ContinuationOptions, fold_curve, trace
+from snapmem.continuation import ContinuationOptions, fold_curve, trace
 from snapmem.viz.plotting import plot_xy
 from snapmem.study import parse_args, save
 

@@ -47,7 +47,7 @@ def _simulate(name, t_end):
 
 def _equilibrium(scene_name, loads, **params):
     from snapmem.scenes import build_scene
-    from snapmem.newton import equilibrium
+    from snapmem.statics import equilibrium
     eq = equilibrium(build_scene(scene_name, **params), loads)
     return {"converged": bool(eq.converged), "iterations": int(eq.report.iterations), "reason": eq.report.reason,
             "q": float(np.linalg.norm(eq.q))}

@@ -15,7 +15,7 @@ import pytest
 from snapmem import Meridian, NewtonOptions, SnapmemError, build_scene, equilibrium, solve
 from snapmem.cli import main, parse_sets
 from snapmem.model.materials import Gent, MooneyRivlin
-from snapmem.continuation.tracer import load_points
+from snapmem.continuation import load_points
 from snapmem.dynamics.driver import Trajectory
 from snapmem.sweeps.sweep import make_job, parse_axis, sweep
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from snapmem import build_scene, exact
-from snapmem.continuation.tracer import ContinuationOptions, fold_curve, load_points, trace
+from snapmem.continuation import ContinuationOptions, fold_curve, load_points, trace
 
 E_HATS = [0.0, 0.1538, 0.2308, 0.3077]
 MODEL_LIMITS = {0.0: 1.407327e-2, 0.1538: 1.335400e-2, 0.2308: 1.247040e-2, 0.3077: 1.125986e-2}

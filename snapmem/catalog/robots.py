@@ -243,7 +243,7 @@ def _ball_scene(params, with_loads):
 
 def _inflated(scene: Scene, pressure: float, voltage: float) -> np.ndarray:
     """The balloon's equilibrium on its plate at (pressure, voltage), without the ball, shape (2N,)."""
-    from snapmem.solvers.newton import equilibrium
+    from snapmem.statics import equilibrium
     keep = [t for t in scene.terms if not isinstance(t, (Ball, Plane))]
     loads = {"pressure": pressure}
     if "voltage" in scene.loads:

@@ -1,3 +1,26 @@
-"""Layer 4: pseudo-arclength continuation of equilibrium branches, their critical points and fold curves."""
+"""Layer 4: pseudo-arclength continuation of equilibrium branches, their critical points and fold curves.
 
-from snapmem.continuation.tracer import *  # noqa: F401,F403
+Modules: ``options`` (ContinuationOptions, FoldOptions, CONTROLS), ``branch`` (Point, Branch,
+PointKind, Outcome, load_points), ``problems`` (what is continued), ``tracer`` (the
+predictor-corrector loop, :func:`trace`), ``events`` (what the loop watches for), ``locate``
+(locating and classifying points between two steps), ``folds`` (:func:`fold_curve`) and
+``hysteresis``.
+"""
+
+from snapmem.continuation.branch import Branch, Outcome, Point, PointKind, load_points
+from snapmem.continuation.events import (CriticalPoints, Event, Found, LossOfTension, SaveAt, Step, Stop,
+                                         StopAtFirstLimit, Until, events_from)
+from snapmem.continuation.folds import fold_curve
+from snapmem.continuation.options import CONTROLS, ContinuationOptions, FoldOptions
+from snapmem.continuation.problems import LoadProblem, VolumeProblem, make_problem
+from snapmem.continuation.tracer import Tracer, snap_by_tracing, trace
+
+__all__ = [
+    "CONTROLS", "ContinuationOptions", "FoldOptions",
+    "Point", "PointKind", "Branch", "Outcome", "load_points",
+    "LoadProblem", "VolumeProblem", "make_problem",
+    "Tracer", "trace", "snap_by_tracing",
+    "Event", "Step", "Found", "Stop", "CriticalPoints", "SaveAt", "Until", "StopAtFirstLimit", "LossOfTension",
+    "events_from",
+    "fold_curve",
+]

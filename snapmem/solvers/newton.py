@@ -17,9 +17,8 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from snapmem.errors import SnapmemError, check_array, check_int, check_real
+from snapmem.errors import check_array, check_int, check_real
 from snapmem.model.scene import Evaluation, Scene
-from snapmem.threads import single_threaded
 
 log = logging.getLogger(__name__)
 
@@ -241,101 +240,3 @@ def solve(scene: Scene, loads: Mapping[str, float] | None = None, q0: np.ndarray
 def start_guess(scene: Scene, loads: Mapping[str, float]) -> np.ndarray:
     """A starting state for Newton: the scene's own guess if it has one, else the reference."""
     return scene.reference_state() if scene.start_guess is None else scene.start_guess(loads)
-
-
-#: The order in which ``equilibrium`` applies loads (the paper inflates, then actuates).
-LOAD_ORDER = ("pressure", "voltage")
-
-
-@single_threaded
-def equilibrium(scene: Scene, loads: Mapping[str, float] | None = None,
-                options: NewtonOptions = NewtonOptions(), min_fraction_step: float = 1e-4) -> Equilibrium:
-    """The equilibrium reached by loading quasi-statically from rest to ``loads``.
-
-    Loads are applied one after the other (``LOAD_ORDER``: pressure, then voltage, then any
-    other), each in adaptive increments (halved on failure, grown when easy) with a secant
-    predictor. If the increments stall, the path has reached a limit point: the membrane snaps.
-    The branch is then traced past the fold (pseudo-arclength) to where the load is back at its
-    target; the report's reason says so ('snapped through at pressure = ...'). If that state is
-    not stable, or the branch never returns to the target, the result is not converged.
-    """
-    target = scene.resolve_loads(loads)
-    current = {k: 0.0 for k in target}
-    order = [k for k in LOAD_ORDER if k in target] + [k for k in target if k not in LOAD_ORDER]
-    if scene.start_guess is not None and any(target.values()):
-        # singular at rest (a flat plate): start just off rest, on the way to the target
-        current = {k: 1e-3 * v for k, v in target.items()}
-    last = solve(scene, current, q0=start_guess(scene, current), options=options)
-    if not last.converged:
-        last.report.reason = f"no equilibrium at the start of the load path: {last.report.reason}"
-        return last
-    iterations, notes = last.report.iterations, []
-    for name in order:
-        if target[name] == current[name]:
-            continue
-        last, its, note = _ramp(scene, last, current, name, target[name], options, min_fraction_step)
-        iterations += its
-        current = dict(last.loads)
-        if note:
-            notes.append(note)
-        if not last.converged:
-            break
-    last.report.iterations = iterations
-    if last.converged and notes:
-        last.report.reason = "converged; " + "; ".join(notes)
-    return last
-
-
-def _ramp(scene, start: Equilibrium, loads, name, value, options, min_fraction_step):
-    """Take load ``name`` from loads[name] to ``value`` by increments; snap through folds."""
-    a = loads[name]
-
-    def at(t):
-        return {**loads, name: a + t * (value - a)}
-
-    t, dt, last, previous, iterations = 0.0, 0.25, start, None, 0
-    while t < 1.0:
-        t_new = min(1.0, t + dt)
-        guess = last.q if previous is None else last.q + (last.q - previous[1]) * (t_new - t) / (t - previous[0])
-        if scene.inadmissible(guess) is not None:      # the secant overshot a lock: restart from the last state
-            guess = last.q
-        trial = solve(scene, at(t_new), q0=guess, options=options)
-        iterations += trial.report.iterations
-        if trial.converged:
-            previous, last, t = (t, last.q), trial, t_new
-            if trial.report.iterations <= 4:
-                dt *= 1.5
-            continue
-        dt *= 0.5
-        if dt < min_fraction_step:
-            snapped = _snap_by_tracing(scene, last, name, value)
-            if snapped is None:
-                last.report.converged = False
-                last.report.reason = (f"no equilibrium on the load path beyond {name} = {at(t)[name]:.6g} "
-                                      "(a limit point or the edge of the material's domain)")
-                return last, iterations, None
-            return snapped, iterations + snapped.report.iterations, f"snapped through at {name} = {at(t)[name]:.6g}"
-    return last, iterations, None
-
-
-def _snap_by_tracing(scene, last: Equilibrium, name, value):
-    """Trace past the fold from ``last`` to the next state with load ``name`` = value; None if none."""
-    from snapmem.continuation.tracer import ContinuationOptions, trace      # continuation builds on this module
-    try:
-        branch = trace(scene, name, until={name: value}, start=(last.q, last.loads),
-                       options=ContinuationOptions(max_steps=500, stability=True))
-    except SnapmemError as exc:
-        log.info("snap-through trace failed: %s", exc)
-        return None
-    except RuntimeError as exc:       # SolverError, or a root finder's "failed to converge" inside the trace
-        log.info("snap-through trace failed: %s", exc)
-        return None
-    end = branch.states[-1]
-    if not branch.status.startswith(f"{name} reached") or end.negative not in (0, None):
-        return None
-    q = scene.reference_state()
-    q[scene.free] = end.x
-    loads = {**last.loads, name: value}
-    eq = solve(scene, loads, q0=q)
-    eq.report.iterations += branch.stats["newton_iterations"]
-    return eq if eq.converged else None

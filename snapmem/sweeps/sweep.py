@@ -204,7 +204,7 @@ def sweep(function: Callable[[dict], Mapping], grid, out, workers: int | None = 
 # named jobs for ``snapmem sweep --job NAME``
 @dataclass(frozen=True)
 class EquilibriumJob:
-    """One equilibrium per design, loaded quasi-statically from rest (:func:`snapmem.solvers.newton.equilibrium`).
+    """One equilibrium per design, loaded quasi-statically from rest (:func:`snapmem.statics.equilibrium`).
 
     A design's parameters override ``fixed`` (both are scene parameters, ``pressure``
     included). Outputs: the scene's measures (volume, u_max, stretch_max, min_tension and its
@@ -231,12 +231,12 @@ class EquilibriumJob:
 
     def warmup(self):
         """Solve one small equilibrium so that kernels are compiled before worker processes fork."""
-        from snapmem.solvers.newton import equilibrium
+        from snapmem.statics import equilibrium
         from snapmem.catalog.scenes import build_scene
         equilibrium(build_scene(self.scene, nodes=7, pressure=1e-4))
 
     def __call__(self, design: dict) -> dict:
-        from snapmem.solvers.newton import equilibrium
+        from snapmem.statics import equilibrium
         from snapmem.catalog.scenes import build_scene
         eq = equilibrium(build_scene(self.scene, **{**self.fixed, **design}))
         out = {name: value for name, value in eq.measures().items() if name != "taut"}

@@ -1,0 +1,195 @@
+"""Events: what the tracer watches for between two accepted points of a branch.
+
+After every accepted step the tracer calls each event's :meth:`Event.check` with a
+:class:`Step` (the previous point, the new one, the branch so far and what the events before
+this one found on the step). An event returns ``None`` (nothing here) or a :class:`Found`: points
+it located between the two (each with its :class:`~snapmem.continuation.branch.PointKind`), and
+optionally a :class:`Stop`. A stop *at* a located point ends the trace there: the points found
+beyond it and the new point are dropped and the events after it are not called. A stop without
+one ends the trace after the new point; the events after it are still called (one may stop
+earlier).
+
+The tracer builds its events from the options and ``until`` (:func:`events_from`), in this
+order: :class:`CriticalPoints`, :class:`SaveAt`, :class:`Until`, :class:`StopAtFirstLimit`, then
+those passed as ``trace(..., events=[...])``. A new event is a subclass of :class:`Event`; no
+loop changes. For example, to record where the volume crosses V0::
+
+    class VolumeCrossing(Event):
+        def check(self, step):
+            f = lambda point: step.output(point, "volume") - V0
+            if f(step.previous) * f(step.new) < 0:
+                return Found([step.locate(f, PointKind.SAVE)])
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Mapping
+
+from snapmem.continuation.branch import Outcome, Point, PointKind
+from snapmem.continuation.locate import locate_critical, locate_value, touching
+from snapmem.continuation.options import ContinuationOptions
+
+
+@dataclass
+class Stop:
+    """End the trace.
+
+    Attributes
+    ----------
+    outcome : Outcome
+        Why, in one word (``Branch.outcome``).
+    status : str
+        Why, in a sentence (``Branch.status``).
+    at : Point, optional
+        The located point the branch ends at; None to end after the new point.
+    """
+
+    outcome: Outcome
+    status: str
+    at: Point | None = None
+
+
+@dataclass
+class Found:
+    """What an event found on a step: located points (in any order) and an optional stop."""
+
+    points: list = field(default_factory=list)
+    stop: Stop | None = None
+
+
+@dataclass
+class Step:
+    """One accepted step, as events see it.
+
+    Attributes
+    ----------
+    tracer : snapmem.continuation.tracer.Tracer
+        The tracer (its problem ``tracer.pb``, options ``tracer.opt``).
+    previous, new : Point
+        The accepted points at the two ends of the step.
+    points : list of Point
+        The branch so far, ending with ``previous`` (accepted and located points).
+    found : list of Point
+        The points the events called before on this step located.
+    """
+
+    tracer: object
+    previous: Point
+    new: Point
+    points: list
+    found: list
+
+    def output(self, point: Point, name: str) -> float:
+        """The output ``name`` at ``point``: the control ('lam' or its name) or a measure
+        (``u_max``, ``stretch_max``, ``volume``, ``min_tension``, the scene's probes, ...)."""
+        return self.tracer.pb.output(point, name)
+
+    def locate(self, f: Callable[[Point], float], kind: PointKind, needs_eigenvalues: bool = False) -> Point | None:
+        """The point between ``previous`` and ``new`` where f(point) = 0 (f must change sign
+        there), of ``kind``; None if it could not be located (the failure is logged).
+        ``needs_eigenvalues``: compute the stability of every point on the way."""
+        return locate_value(self.tracer, self.previous, self.new, lambda point, s: f(point), kind,
+                            needs_eigenvalues=needs_eigenvalues)
+
+
+class Event:
+    """Base of the events a trace watches for: override :meth:`check`."""
+
+    def check(self, step: Step) -> Found | None:
+        """What this event finds on ``step``: None, or the points located and/or a stop."""
+        raise NotImplementedError
+
+
+class CriticalPoints(Event):
+    """Limit and bifurcation points: where the negative eigenvalue count changes between the two
+    points, or an eigenvalue dips to zero and back (then three points are compared)."""
+
+    def check(self, step: Step) -> Found | None:
+        previous, new = step.previous, step.new
+        if new.negative != previous.negative:
+            return Found([locate_critical(step.tracer, previous, new)])
+        if len(step.points) >= 2:
+            return Found(touching(step.tracer, step.points[-2], previous, new))
+        return None
+
+
+class SaveAt(Event):
+    """Points located exactly where the control parameter crosses any of ``values``."""
+
+    def __init__(self, values):
+        self.values = sorted(values)
+
+    def check(self, step: Step) -> Found | None:
+        previous, new = step.previous, step.new
+        located = []
+        for value in self.values:
+            if (previous.lam - value) * (new.lam - value) < 0:
+                point = locate_value(step.tracer, previous, new, lambda pt, s, v=value: pt.lam - v, PointKind.SAVE,
+                                     needs_eigenvalues=False)
+                if point is not None:
+                    located.append(point)
+        return Found(located) if located else None
+
+
+class Until(Event):
+    """Stop where an output reaches its value: ``targets`` maps output names (as
+    :meth:`Step.output` takes them) to values; the first one reached on a step ends the branch at
+    the point located on it (kind END)."""
+
+    def __init__(self, targets: Mapping[str, float]):
+        self.targets = dict(targets)
+
+    def check(self, step: Step) -> Found | None:
+        previous, new = step.previous, step.new
+        for name, value in self.targets.items():
+            f0 = step.output(previous, name) - value
+            f1 = step.output(new, name) - value
+            if f0 * f1 <= 0 and f1 != f0:
+                point = locate_value(step.tracer, previous, new, lambda pt, s, n=name, v=value: step.output(pt, n) - v,
+                                     PointKind.END, needs_eigenvalues=False)
+                if point is None:          # not located: go on past it
+                    return None
+                return Found(stop=Stop(Outcome.TARGET_REACHED, f"{name} reached {value:g}", point))
+        return None
+
+
+class StopAtFirstLimit(Event):
+    """Stop after the step on which an event before this one located a limit point."""
+
+    def check(self, step: Step) -> Found | None:
+        if any(point.kind == PointKind.LP for point in step.found):
+            return Found(stop=Stop(Outcome.FIRST_LIMIT, "stopped at the first limit point"))
+        return None
+
+
+class LossOfTension(Event):
+    """Stop where the membrane goes slack: the smallest principal tension ``min_tension`` [N/m]
+    falls to zero between two points; the branch ends at the point located there (kind END).
+    Not among the events the options build: pass it as ``trace(..., events=[LossOfTension()])``."""
+
+    def check(self, step: Step) -> Found | None:
+        def tension(point):
+            return step.output(point, "min_tension")
+
+        if not tension(step.previous) > 0.0 >= tension(step.new):
+            return None
+        point = step.locate(tension, PointKind.END)
+        if point is None:
+            return None
+        control = step.tracer.pb.control
+        return Found(stop=Stop(Outcome.TENSION_LOST, f"tension lost at {control} = {point.lam:.6g}", point))
+
+
+def events_from(options: ContinuationOptions, until: Mapping[str, float] | None = None) -> list[Event]:
+    """The events ``options`` and ``until`` ask for, in the order the tracer calls them."""
+    events: list[Event] = []
+    if options.stability:
+        events.append(CriticalPoints())
+    if options.save_at:
+        events.append(SaveAt(options.save_at))
+    if until:
+        events.append(Until(until))
+    if options.stop_at_first_limit:
+        events.append(StopAtFirstLimit())
+    return events

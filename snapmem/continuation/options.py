@@ -1,0 +1,101 @@
+"""Options of continuation: what :func:`~snapmem.continuation.tracer.trace` and
+:func:`~snapmem.continuation.folds.fold_curve` take, with their defaults and checks."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from snapmem.errors import SnapmemError, check_int, check_real
+
+#: The parameters a branch can be traced in.
+CONTROLS = ("pressure", "voltage", "E_hat", "volume")
+
+
+@dataclass(frozen=True)
+class ContinuationOptions:
+    """Options of :func:`snapmem.continuation.tracer.trace`, with their defaults.
+
+    Attributes
+    ----------
+    ds : float
+        First step length (scaled arclength, dimensionless), default 0.05.
+    ds_min, ds_max : float
+        Step bounds, default 1e-6 and 0.3.
+    max_steps : int
+        Accepted steps at most, default 2000.
+    newton_tol : float
+        Corrector tolerance on max |R| relative to the scene's force scale, default 1e-10.
+    max_corrector_iterations : int
+        Default 8; more means the step is cut.
+    target_iterations : int
+        Corrector iterations aimed at; fewer grow the step, more shrink it. Default 3.
+    max_angle : float
+        Largest angle between consecutive tangents [rad] before a step is cut, default 0.3.
+    n_eigs : int
+        Eigenvalues nearest zero watched at every point, default 2 (the negative count comes
+        from an LDL^T factorisation, not from these).
+    stability : bool
+        Compute eigenvalues and inertia at every point (default True).
+    locate : bool
+        Locate critical points precisely (default True).
+    stop_at_first_limit : bool
+        Stop the trace at the first limit point (default False).
+    save_at : tuple of float
+        Values of the control parameter at which points are located exactly (not interpolated).
+    direction : int
+        +1 to start with the parameter increasing, -1 decreasing.
+    """
+
+    ds: float = 0.05
+    ds_min: float = 1e-6
+    ds_max: float = 0.3
+    max_steps: int = 2000
+    newton_tol: float = 1e-10
+    max_corrector_iterations: int = 8
+    target_iterations: int = 3
+    max_angle: float = 0.3
+    n_eigs: int = 2
+    stability: bool = True
+    locate: bool = True
+    stop_at_first_limit: bool = False
+    save_at: tuple = ()
+    direction: int = 1
+
+    def __post_init__(self):
+        check_real("ds", self.ds, minimum=0.0, min_inclusive=False)
+        check_real("ds_min", self.ds_min, minimum=0.0, min_inclusive=False)
+        check_real("ds_max", self.ds_max, minimum=self.ds_min)
+        check_int("max_steps", self.max_steps, minimum=1)
+        check_real("newton_tol", self.newton_tol, minimum=0.0, min_inclusive=False)
+        check_int("max_corrector_iterations", self.max_corrector_iterations, minimum=1)
+        check_int("target_iterations", self.target_iterations, minimum=1)
+        check_real("max_angle", self.max_angle, minimum=0.0, min_inclusive=False, maximum=math.pi)
+        check_int("n_eigs", self.n_eigs, minimum=1)
+        if self.direction not in (1, -1):
+            raise SnapmemError(f"direction = {self.direction!r}: must be +1 or -1")
+        object.__setattr__(self, "save_at", tuple(check_real("save_at", v) for v in self.save_at))
+
+
+@dataclass(frozen=True)
+class FoldOptions:
+    """Options of :func:`snapmem.continuation.folds.fold_curve`.
+
+    Attributes
+    ----------
+    tol : float
+        Newton tolerance on max |R| relative to the force scale, default 1e-10.
+    max_iterations : int
+        Newton iterations per value, default 15.
+    max_refinements : int
+        Times a failed increment of the second parameter is halved, default 6.
+    trace_until : mapping
+        Where the first trace (and a fallback trace) gives up looking for a limit point,
+        default stretch_max = 12.
+    """
+
+    tol: float = 1e-10
+    max_iterations: int = 15
+    max_refinements: int = 6
+    trace_until: tuple = (("stretch_max", 12.0),)
+
