@@ -17,10 +17,10 @@ from snapmem.model.materials import LAWS, Law, law_class
 from snapmem.model.parameters import Parameter
 from snapmem.model.scene import Scene
 
-__all__ = ["Parameter", "SceneSpec", "SCENES", "register", "get_spec", "build_scene", "law_parameter_names"]
+__all__ = ["Parameter", "SceneSpec", "SCENES", "register", "get_spec", "build_scene"]
 
 
-def law_parameter_names() -> set:
+def _law_parameter_names() -> set:
     """Names of the parameters of every registered law, and ``mu`` (the scenes' shear modulus)."""
     return {"mu"}.union(*(names for _, names in LAWS.values()))
 
@@ -63,7 +63,7 @@ class SceneSpec:
         if not self.takes_material:
             return known
         if isinstance(material, Law):
-            law_names = law_parameter_names()
+            law_names = _law_parameter_names()
             return {name: p for name, p in known.items() if name not in law_names}
         chosen = law_class(material)
         known.update({p.name: p for p in chosen.parameters if p.name not in known})
@@ -90,7 +90,7 @@ class SceneSpec:
         for key in values:
             if key in known:
                 continue
-            if law is not None and key in law_parameter_names():
+            if law is not None and key in _law_parameter_names():
                 raise SnapmemError(f"parameter {key!r}: the law is given as an instance (law = {law!r}); "
                                    "set its parameters there")
             raise SnapmemError(f"parameter {key!r}: scene {self.name!r} has no such parameter; "

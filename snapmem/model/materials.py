@@ -357,7 +357,7 @@ def register_law(cls: type, name: str | None = None) -> type:
 
 def law_class(name: str) -> type:
     """The law class registered as ``name``, or SnapmemError listing the registered ones."""
-    if name not in LAWS:
+    if not isinstance(name, str) or name not in LAWS:
         raise SnapmemError(f"material = {name!r}: unknown law; must be one of {', '.join(LAWS)}")
     return LAWS[name][0]
 
