@@ -16,7 +16,7 @@ from snapmem import _moved
 _moved.install()                 # the flat module paths of snapmem 0.1 keep working
 
 from snapmem.errors import SnapmemError, SolverError
-from snapmem.model.materials import Gent, Law, InvariantLaw, MooneyRivlin, NeoHookean, Yeoh, LAWS, make_law
+from snapmem.model.materials import Gent, Law, InvariantLaw, MooneyRivlin, NeoHookean, Yeoh, LAWS, make_law, register_law
 from snapmem.model.meridian import Meridian, disc, sphere, torus
 from snapmem.solvers.newton import Equilibrium, NewtonOptions, NewtonReport, solve
 from snapmem.statics import equilibrium
@@ -27,7 +27,7 @@ import snapmem.model.contact as contact  # noqa: F401  (registers the contact te
 
 __all__ = [
     "SnapmemError", "SolverError",
-    "Law", "InvariantLaw", "NeoHookean", "MooneyRivlin", "Gent", "Yeoh", "LAWS", "make_law",
+    "Law", "InvariantLaw", "NeoHookean", "MooneyRivlin", "Gent", "Yeoh", "LAWS", "make_law", "register_law",
     "Meridian", "disc", "sphere", "torus",
     "Scene", "Stretching", "Electric", "PressureWork",
     "Equilibrium", "NewtonOptions", "NewtonReport", "equilibrium", "solve",

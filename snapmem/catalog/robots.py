@@ -1,7 +1,7 @@
-"""The paper's soft robots (section 4) and its dynamic torus: scenes with their time schedules.
+"""The paper's soft robots (section 4) and its dynamic torus: their time schedules.
 
-Every scene here is registered like the validation scenes (``snapmem scenes`` lists them) and
-also has an *experiment*: the loads in time, the end time, density, damping and start state, so
+Every scene here is registered like the validation scenes (snapmem.catalog.robot_scenes;
+``snapmem scenes`` lists them) and also has an *experiment*: the loads in time, the end time, density, damping and start state, so
 that ``snapmem simulate NAME`` or :func:`run` replays it. SI units; eps = 1e-10 F/m.
 
 * ``pump`` (Fig. 6): Gent plate R = 0.1 m at 300 V; pressure 0 until 5 s, +10 Pa/s to 15 s,
@@ -29,17 +29,14 @@ from typing import Callable
 
 import numpy as np
 
-from snapmem.model.contact import Ball, Plane, Rod, Shell, contact_report
+from snapmem.catalog.registry import get_spec
+from snapmem.catalog.robot_scenes import EPS, MU_MR, ROBOTIC_SCENES  # noqa: F401  (public names of this module)
 from snapmem.dynamics.driver import DynamicsOptions, Trajectory, schedule, simulate
 from snapmem.errors import SnapmemError
-from snapmem.model.meridian import sphere, torus
-from snapmem.solvers.newton import NewtonOptions, solve
+from snapmem.model.contact import Ball, Plane
 from snapmem.model.scene import Scene
-from snapmem.catalog.scenes import (Parameter, SceneSpec, _common, _with_default, build_membrane, get_spec, material_parameters,
-                     register)
-
-EPS = 1e-10                     # permittivity of every robotic scene [F/m]
-MU_MR = 4.225e5                 # shear modulus of the gripper and ball membranes [Pa]
+from snapmem.solvers.newton import NewtonOptions, solve
+from snapmem.statics import equilibrium
 
 
 @dataclass
@@ -104,30 +101,6 @@ def run(name: str, t_end: float | None = None, options: DynamicsOptions | None =
     return traj
 
 
-def _with_contact(scene: Scene, *contacts) -> Scene:
-    """The same scene with contact terms added, and each body's total contact force [N] and
-    smallest gap [m] as probes (so continuation tables and measures report them)."""
-    out = Scene(scene.meridian, scene.thickness, scene.terms + tuple(contacts), fixed=scene.fixed,
-                loads=scene.loads, name=scene.name, parameters=scene.parameters,
-                start_guess=scene.start_guess, probes=scene.probes)
-    for key in contact_report(out, out.reference_state()):
-        out.probes[key] = (lambda k: lambda q: contact_report(out, q)[k])(key)
-    return out
-
-
-def _dynamics_parameters(rho, xi, t_end, tol=1e-3):
-    return (Parameter("rho", rho, "kg/m^3", "membrane density", minimum=0.0, open_min=True),
-            Parameter("xi", xi, "1/s", "mass-proportional damping", minimum=0.0),
-            Parameter("t_end", t_end, "s", "end of the simulation", minimum=0.0, open_min=True),
-            Parameter("tol", tol, "", "local time-error tolerance per step, fraction of the size",
-                      minimum=0.0, open_min=True))
-
-
-def _contact_parameters(kappa, dhat):
-    return (Parameter("kappa", kappa, "Pa", "contact pressure scale of the barrier", minimum=0.0, open_min=True),
-            Parameter("dhat", dhat, "m", "barrier width", minimum=0.0, open_min=True))
-
-
 def _options(params, **extra) -> DynamicsOptions:
     """BDF2 at the scene's tolerance, about 2000 frames recorded (the smallest gap of every step is kept)."""
     return DynamicsOptions(**{"scheme": "bdf2", "tol": params["tol"], "save_interval": params["t_end"] / 2000,
@@ -136,14 +109,6 @@ def _options(params, **extra) -> DynamicsOptions:
 
 # ------------------------------------------------------------------------------------------
 # pump
-def _pump(params, with_loads):
-    """The validation plate's scene (rim clamped, Hencky start guess for continuation) named pump."""
-    from snapmem.catalog.scenes import _plate
-    scene = _plate(params, tuple(with_loads) + ("voltage",))
-    scene.name = "pump"
-    return scene
-
-
 def _pump_experiment(scene: Scene) -> Experiment:
     p = scene.parameters
     rate, t_up, t_hold, t_down = p["rate"], p["t_up"], p["t_hold"], p["t_down"]
@@ -163,45 +128,11 @@ def _pump_experiment(scene: Scene) -> Experiment:
                       options=_options(p, dt=1e-3, dt_max=0.5, scheme="euler"))
 
 
-register(SceneSpec(
-    "pump", "fluid pump: Gent plate at 300 V, pressure cycle 0-30 s (paper Fig. 6)",
-    _with_default(_common(61), H=1e-4)
-    + (Parameter("R", 0.1, "m", "plate radius", minimum=0.0, open_min=True),)
-    + _with_default(material_parameters(material="gent", eps=EPS), voltage=300.0, mu=45e3)
-    + (Parameter("rate", 10.0, "Pa/s", "pressure rate up and down", minimum=0.0, open_min=True),
-       Parameter("t_up", 5.0, "s", "pressure starts rising", minimum=0.0),
-       Parameter("t_hold", 15.0, "s", "pressure held and voltage switched off", minimum=0.0),
-       Parameter("t_switch", 0.05, "s", "time the voltage takes to fall to 0", minimum=0.0, open_min=True),
-       Parameter("t_down", 20.0, "s", "pressure starts falling", minimum=0.0))
-    + _dynamics_parameters(1000.0, 1.0, 30.0, tol=2e-2),
-    _pump))
 EXPERIMENTS["pump"] = _pump_experiment
 
 
 # ------------------------------------------------------------------------------------------
 # grippers
-def _gripper(kind):
-    def build(params, with_loads):
-        Rb, Rs = params["Rb"], params["Rs"]
-        if Rs >= Rb:
-            raise SnapmemError(f"Rs = {Rs:g}: must be < Rb = {Rb:g}")
-        meridian = torus(Rb, Rs, params["nodes"])
-        scene = build_membrane(params, with_loads, meridian, [1], f"gripper_{kind}",
-                               probes={"outer_radius": lambda q: float(q[0::2][: meridian.nodes].max()),
-                                       "inner_radius": lambda q: float(q[0::2][: meridian.nodes].min())})
-        Rw = params["Rw"]
-        if kind == "rod":
-            if not 0 < Rw < Rb - Rs:
-                raise SnapmemError(f"Rw = {Rw:g}: the rod must fit in the hole, 0 < Rw < Rb - Rs = {Rb - Rs:g}")
-            body = Rod(kappa=params["kappa"], dhat=params["dhat"], radius=Rw)
-        else:
-            if Rw <= Rb + Rs:
-                raise SnapmemError(f"Rw = {Rw:g}: the shell must lie outside the torus, Rw > Rb + Rs = {Rb + Rs:g}")
-            body = Shell(kappa=params["kappa"], dhat=params["dhat"], radius=Rw)
-        return _with_contact(scene, body)
-    return build
-
-
 def _gripper_experiment(scene: Scene) -> Experiment:
     p = scene.parameters
     t_top = p["p_max"] / p["rate"]
@@ -209,41 +140,14 @@ def _gripper_experiment(scene: Scene) -> Experiment:
     return Experiment(scene, loads, p["t_end"], p["rho"], p["xi"], options=_options(p, dt=1e-3, dt_max=0.5))
 
 
-for _kind, _rw, _pmax in (("rod", 0.04, 2500.0), ("shell", 0.25, 2500.0)):
-    register(SceneSpec(
-        f"gripper_{_kind}",
-        f"toroidal gripper {'around a rod' if _kind == 'rod' else 'inside a cylindrical shell'} (paper Fig. 7)",
-        _with_default(_common(80), H=1e-4)
-        + (Parameter("Rb", 0.1, "m", "axis to the centre of the cross-section", minimum=0.0, open_min=True),
-           Parameter("Rs", 0.02, "m", "cross-section radius (< Rb)", minimum=0.0, open_min=True),
-           Parameter("Rw", _rw, "m", "rod radius" if _kind == "rod" else "inner radius of the shell",
-                     minimum=0.0, open_min=True))
-        + _with_default(material_parameters(eps=EPS), mu=MU_MR)
-        + _contact_parameters(1e5, 5e-4)
-        + (Parameter("rate", 100.0, "Pa/s", "pressure rate", minimum=0.0, open_min=True),
-           Parameter("p_max", _pmax, "Pa", "pressure held after the ramp", minimum=0.0))
-        + _dynamics_parameters(1000.0, 1.0, 30.0, tol=1e-2),
-        _gripper(_kind)))
-    EXPERIMENTS[f"gripper_{_kind}"] = _gripper_experiment
+EXPERIMENTS["gripper_rod"] = _gripper_experiment
+EXPERIMENTS["gripper_shell"] = _gripper_experiment
 
 
 # ------------------------------------------------------------------------------------------
 # ball actuator
-def _ball_scene(params, with_loads):
-    R = params["R"]
-    meridian = sphere(R, params["nodes"])
-    n = meridian.nodes
-    scene = build_membrane(params, with_loads, meridian, [0, 1, 2 * (n - 1)], params["name"],
-                           probes={"top": lambda q: float(q[2 * n - 1])})
-    plate = Plane(kappa=params["kappa"], dhat=params["dhat"], z0=-R, nodes=tuple(range(1, n)))
-    ball = Ball(kappa=params["kappa"], dhat=params["dhat"], radius=params["rb"], z0=R + params["rb"] + params["drop"],
-                mass=params["mb"], gravity=params["g"], meridian=meridian)      # edges cannot pass through it
-    return _with_contact(scene, plate, ball)
-
-
 def _inflated(scene: Scene, pressure: float, voltage: float) -> np.ndarray:
     """The balloon's equilibrium on its plate at (pressure, voltage), without the ball, shape (2N,)."""
-    from snapmem.statics import equilibrium
     keep = [t for t in scene.terms if not isinstance(t, (Ball, Plane))]
     loads = {"pressure": pressure}
     if "voltage" in scene.loads:
@@ -291,58 +195,19 @@ def _ball_throw_experiment(scene: Scene) -> Experiment:
                       options=_options(p, dt=1e-3, dt_max=0.05))
 
 
-def _ball_parameters(name, t_end, drop, damp_ball):
-    return (_with_default(_common(61), H=1e-4)
-            + (Parameter("R", 0.1, "m", "balloon radius", minimum=0.0, open_min=True),
-               Parameter("name", name, "", "scene name", str))
-            + _with_default(material_parameters(eps=EPS), mu=MU_MR, pressure=500.0)
-            + _contact_parameters(1e4, 1e-3)
-            + (Parameter("rb", 0.05, "m", "ball radius", minimum=0.0, open_min=True),
-               Parameter("mb", 0.5, "kg", "ball mass", minimum=0.0, open_min=True),
-               Parameter("g", -10.0, "m/s^2", "gravity along z"),
-               Parameter("drop", drop, "m", "gap between ball and balloon top at the start", minimum=0.0,
-                         open_min=True),
-               Parameter("damp_ball", damp_ball, "", "1: damping xi acts on the ball too; 0: it flies freely", int,
-                         minimum=0, maximum=1),
-               Parameter("rate", 100.0, "Pa/s", "pressure rate (ball_throw)"))
-            + _dynamics_parameters(1000.0, 1.0, t_end, tol=4e-3))
-
-
-register(SceneSpec("ball_drop", "ball dropped on a balloon held at 500 Pa on a plate (paper Fig. 8, case 1)",
-                   _ball_parameters("ball_drop", 5.0, 0.05, 1), _ball_scene))
-register(SceneSpec("ball_throw", "balloon snaps through under rising pressure and throws the ball (paper Fig. 8, case 2)",
-                   _ball_parameters("ball_throw", 2.0, 0.001, 0), _ball_scene))
 EXPERIMENTS["ball_drop"] = _ball_drop_experiment
 EXPERIMENTS["ball_throw"] = _ball_throw_experiment
 
 
 # ------------------------------------------------------------------------------------------
 # torus_snap: the default scene of the paper's C++ code
-def _torus_snap(params, with_loads):
-    meridian = torus(params["Rb"], params["Rs"], params["nodes"])
-    return build_membrane(params, with_loads, meridian, [1], "torus_snap",
-                          probes={"outer_radius": lambda q: float(q[0::2][: meridian.nodes].max())})
-
-
 def _torus_snap_experiment(scene: Scene) -> Experiment:
     p = scene.parameters
     loads = schedule(pressure=[(0.0, 0.0), (p["p_max"] / p["rate"], p["p_max"])])
     return Experiment(scene, loads, p["t_end"], p["rho"], p["xi"], options=_options(p, dt=1e-3, dt_max=1.0))
 
 
-register(SceneSpec(
-    "torus_snap", "the paper's C++ default: torus Rs = 2 about Rb = 10 inflated to 200, snaps through",
-    _with_default(_common(200), H=0.1)
-    + (Parameter("Rb", 10.0, "", "axis to the centre of the cross-section", minimum=0.0, open_min=True),
-       Parameter("Rs", 2.0, "", "cross-section radius (< Rb)", minimum=0.0, open_min=True))
-    + _with_default(material_parameters(), mu=4225.0)
-    + (Parameter("rate", 100.0, "1/s", "pressure rate", minimum=0.0, open_min=True),
-       Parameter("p_max", 200.0, "", "pressure held after the ramp", minimum=0.0))
-    + _dynamics_parameters(100.0, 1.0, 100.0),
-    _torus_snap))
 EXPERIMENTS["torus_snap"] = _torus_snap_experiment
-
-ROBOTIC_SCENES = ("pump", "gripper_rod", "gripper_shell", "ball_drop", "ball_throw")
 
 
 def events(traj: Trajectory) -> dict:

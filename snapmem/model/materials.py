@@ -5,8 +5,21 @@ reference volume and its first and second derivatives in the two in-plane princi
 (thickness stretch eliminated by incompressibility, lam3 = 1 / (lam1 lam2)). Arrays of shape (E,).
 
 Laws written in the invariants I1, I2 subclass :class:`InvariantLaw` and give only dW/dI and
-d2W/dI2; the chain rule to (lam1, lam2) is written once, here. Adding a law is one small class
-plus one line in ``LAWS``.
+d2W/dI2; the chain rule to (lam1, lam2) is written once, here.
+
+Every law declares its parameters (:class:`~snapmem.model.parameters.Parameter`: name, default,
+unit, doc, allowed range) and an example instance; :func:`register_law` makes it known by name,
+so that scenes, the command line (``--set material=NAME`` and its parameters) and the tests that
+check every law take it from there. A law defined outside the package works the same way::
+
+    @register_law
+    @dataclass(frozen=True)
+    class Ogden1(Law):
+        mu: float
+        alpha: float
+        parameters = (Parameter("mu", 1.0, "Pa", "shear modulus", minimum=0.0, open_min=True),
+                      Parameter("alpha", 2.0, "", "exponent", minimum=0.0, open_min=True))
+        def density(self, lam1, lam2): ...
 """
 
 from __future__ import annotations
@@ -15,8 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from snapmem.errors import SnapmemError, check_real
+from snapmem.errors import SnapmemError
 from snapmem.kernels.assembly import invariant_chain, linear_law_density
+from snapmem.model.parameters import Parameter
 
 
 #: Use the compiled chain rule (snapmem.kernels.invariant_chain) for 1D float arrays; False
@@ -51,10 +65,66 @@ class Density:
 
 
 class Law:
-    """Base of all strain energy densities W(lam1, lam2) [Pa]."""
+    """Base of all strain energy densities W(lam1, lam2) [Pa].
+
+    A subclass implements ``density`` (and ``admissible`` if W is not finite for every positive
+    stretch), has an initial shear modulus ``mu`` [Pa], declares ``parameters`` in the order its
+    constructor takes them as keywords, and may override ``example`` and ``with_modulus``. Frozen
+    dataclass laws get their declared parameters checked on construction (``__post_init__``).
+    """
 
     #: initial shear modulus [Pa], used to normalise loads (E_hat, p_hat)
     mu: float
+
+    #: the law's parameters (name, default, unit, doc, allowed range), each a constructor keyword
+    parameters: tuple = ()
+
+    def __post_init__(self):
+        """SnapmemError naming the first declared parameter that is not set or out of its range."""
+        for p in self.parameters:
+            value = getattr(self, p.name)
+            if value is None:
+                raise SnapmemError(f"{p.name} = None: must be a real number")
+            p.check(value, parse_text=False)
+
+    @classmethod
+    def from_parameters(cls, **values) -> "Law":
+        """An instance from parameter values by name (in their declared units).
+
+        Missing parameters take their declared defaults; numbers may come as text (as from the
+        command line); each value is checked against its declared range.
+        """
+        known = {p.name: p for p in cls.parameters}
+        for key in values:
+            if key not in known:
+                raise SnapmemError(f"parameter {key!r}: law {cls.__name__} has no such parameter; "
+                                   f"it has {', '.join(known) or 'none'}")
+        return cls(**{name: p.check(values.get(name, p.default)) for name, p in known.items()})
+
+    @classmethod
+    def example(cls) -> "Law":
+        """A typical instance, for the tests that check every registered law (here: the defaults)."""
+        return cls.from_parameters()
+
+    @classmethod
+    def with_modulus(cls, values: dict, mu: float) -> dict:
+        """Parameter values changed so that the law they make has initial shear modulus ``mu`` [Pa].
+
+        Scenes use it for their parameter ``mu``. Here: a parameter named ``mu`` is set; a law
+        without one has its parameters in Pa scaled by mu / (its modulus), which scales W and so
+        its modulus (values already at modulus ``mu`` come back unchanged).
+        """
+        full = {p.name: values.get(p.name, p.default) for p in cls.parameters}
+        if "mu" in full:
+            return {**full, "mu": mu}
+        current = cls.from_parameters(**full).mu
+        stresses = [p.name for p in cls.parameters if p.unit == "Pa"]
+        if current == mu:
+            return full
+        if not stresses:
+            raise SnapmemError(f"law {cls.__name__}: no parameter in Pa to give it shear modulus mu = {mu:g}; "
+                               "define its with_modulus")
+        return {**full, **{name: full[name] * (mu / current) for name in stresses}}
 
     def density(self, lam1: np.ndarray, lam2: np.ndarray) -> Density:
         raise NotImplementedError
@@ -134,9 +204,7 @@ class NeoHookean(InvariantLaw):
 
     mu: float
     linear = True
-
-    def __post_init__(self):
-        check_real("mu", self.mu, minimum=0.0, min_inclusive=False)
+    parameters = (Parameter("mu", 1.0, "Pa", "shear modulus", minimum=0.0, open_min=True),)
 
     def invariant_derivatives(self, I1, I2):
         zero = np.zeros_like(I1)
@@ -156,14 +224,20 @@ class MooneyRivlin(InvariantLaw):
     c1: float
     c2: float
     linear = True
-
-    def __post_init__(self):
-        check_real("c1", self.c1, minimum=0.0, min_inclusive=False)
-        check_real("c2", self.c2, minimum=0.0)
+    parameters = (Parameter("c1", 0.4375, "Pa", "constant of I1 - 3", minimum=0.0, open_min=True),
+                  Parameter("c2", 0.0625, "Pa", "constant of I2 - 3", minimum=0.0))
 
     @property
     def mu(self) -> float:
         return 2.0 * (self.c1 + self.c2)
+
+    @classmethod
+    def with_modulus(cls, values, mu):
+        """c1 and c2 scaled to 2 (c1 + c2) = mu, keeping c1/c2 (unchanged if that holds already)."""
+        c1, c2 = (values.get(p.name, p.default) for p in cls.parameters)
+        if mu == 2.0 * (c1 + c2):
+            return {**values, "c1": c1, "c2": c2}
+        return {**values, "c1": mu * c1 / (2 * (c1 + c2)), "c2": mu * c2 / (2 * (c1 + c2))}
 
     def invariant_derivatives(self, I1, I2):
         zero = np.zeros_like(I1)
@@ -184,10 +258,12 @@ class Gent(InvariantLaw):
 
     mu: float
     Jlim: float
+    parameters = (Parameter("mu", 1.0, "Pa", "shear modulus", minimum=0.0, open_min=True),
+                  Parameter("Jlim", 270.0, "", "limit of I1 - 3", minimum=0.0, open_min=True))
 
-    def __post_init__(self):
-        check_real("mu", self.mu, minimum=0.0, min_inclusive=False)
-        check_real("Jlim", self.Jlim, minimum=0.0, min_inclusive=False)
+    @classmethod
+    def example(cls):
+        return cls(mu=1.0, Jlim=20.0)        # a lock within reach of the tests' stretches
 
     def invariant_derivatives(self, I1, I2):
         s = 1.0 - (I1 - 3.0) / self.Jlim           # > 0 inside the domain
@@ -215,15 +291,22 @@ class Yeoh(InvariantLaw):
     c1: float
     c2: float = 0.0
     c3: float = 0.0
-
-    def __post_init__(self):
-        check_real("c1", self.c1, minimum=0.0, min_inclusive=False)
-        check_real("c2", self.c2)
-        check_real("c3", self.c3)
+    parameters = (Parameter("c1", 0.5, "Pa", "constant of I1 - 3", minimum=0.0, open_min=True),
+                  Parameter("c2", 0.0, "Pa", "constant of (I1 - 3)^2"),
+                  Parameter("c3", 0.0, "Pa", "constant of (I1 - 3)^3"))
 
     @property
     def mu(self) -> float:
         return 2.0 * self.c1
+
+    @classmethod
+    def with_modulus(cls, values, mu):
+        """c1 = mu / 2; c2 and c3 unchanged."""
+        return {**values, "c1": 0.5 * mu}
+
+    @classmethod
+    def example(cls):
+        return cls(c1=0.5, c2=-0.01, c3=0.002)
 
     def invariant_derivatives(self, I1, I2):
         x = I1 - 3.0
@@ -234,27 +317,64 @@ class Yeoh(InvariantLaw):
         return W, W1, zero, W11, zero, zero
 
 
-#: Laws by name, for scenes and the command line: name -> (class, parameter names).
-LAWS = {
-    "neo_hookean": (NeoHookean, ("mu",)),
-    "mooney_rivlin": (MooneyRivlin, ("c1", "c2")),
-    "gent": (Gent, ("mu", "Jlim")),
-    "yeoh": (Yeoh, ("c1", "c2", "c3")),
-}
+#: Registered laws by name, for scenes, the command line and the tests that check every law:
+#: name -> (class, its parameter names). Filled by :func:`register_law`.
+LAWS: dict[str, tuple[type, tuple[str, ...]]] = {}
 
 
-#: Parameters of one instance of every law, for tests that check every registered law.
-EXAMPLES = {
-    "neo_hookean": {"mu": 1.0},
-    "mooney_rivlin": {"c1": 0.4375, "c2": 0.0625},
-    "gent": {"mu": 1.0, "Jlim": 20.0},
-    "yeoh": {"c1": 0.5, "c2": -0.01, "c3": 0.002},
-}
+def _snake_case(name: str) -> str:
+    return "".join("_" + c.lower() if c.isupper() and i else c.lower() for i, c in enumerate(name))
+
+
+def register_law(cls: type, name: str | None = None) -> type:
+    """Make a law class known by name (``build_scene(..., material=name)``, ``--set material=NAME``).
+
+    Parameters
+    ----------
+    cls : type
+        A subclass of :class:`Law` declaring its ``parameters`` (its constructor takes them as
+        keywords).
+    name : str, optional
+        Default: the class name in snake case (``MooneyRivlin`` -> ``mooney_rivlin``).
+
+    Returns
+    -------
+    type
+        ``cls``, so that ``@register_law`` works as a class decorator.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Law)):
+        raise SnapmemError(f"register_law({cls!r}): must be a subclass of snapmem.Law")
+    if not all(isinstance(p, Parameter) for p in cls.parameters):
+        raise SnapmemError(f"register_law({cls.__name__}): parameters must be a tuple of snapmem.Parameter")
+    name = _snake_case(cls.__name__) if name is None else name
+    if not name.isidentifier():
+        raise SnapmemError(f"register_law({cls.__name__}): name {name!r} must be a word (letters, digits, _)")
+    if name in LAWS and LAWS[name][0] is not cls:
+        raise SnapmemError(f"register_law({cls.__name__}): the name {name!r} is taken by {LAWS[name][0].__name__}")
+    LAWS[name] = (cls, tuple(p.name for p in cls.parameters))
+    return cls
+
+
+def law_class(name: str) -> type:
+    """The law class registered as ``name``, or SnapmemError listing the registered ones."""
+    if not isinstance(name, str) or name not in LAWS:
+        raise SnapmemError(f"material = {name!r}: unknown law; must be one of {', '.join(LAWS)}")
+    return LAWS[name][0]
+
+
+def law_name(law: Law) -> str:
+    """The name a law instance's class is registered under (its class name if it is not registered)."""
+    return next((name for name, (cls, _) in LAWS.items() if cls is type(law)), type(law).__name__)
 
 
 def make_law(name: str, **params) -> Law:
-    """Build a law by its name in ``LAWS`` from keyword parameters (extra ones are ignored)."""
-    if name not in LAWS:
-        raise SnapmemError(f"material = {name!r}: unknown law; allowed: {', '.join(LAWS)}")
-    cls, names = LAWS[name]
-    return cls(**{k: params[k] for k in names if k in params})
+    """Build a law by its name in ``LAWS`` from keyword parameters (extra ones are ignored; missing
+    ones take their declared defaults)."""
+    cls = law_class(name)
+    return cls.from_parameters(**{k: v for k, v in params.items() if k in LAWS[name][1]})
+
+
+register_law(NeoHookean)
+register_law(MooneyRivlin)
+register_law(Gent)
+register_law(Yeoh)

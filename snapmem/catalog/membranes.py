@@ -1,0 +1,182 @@
+"""The validation scenes (plate, balloon, torus) and the parameters and assembly every membrane
+scene shares.
+
+The defaults of ``plate``, ``balloon`` and ``torus`` are the paper's validation cases (MODEL.md
+section 6), in normalised units (mu = 1, so pressures are p_hat and stresses are in units of mu).
+The material parameters come from the registered laws (snapmem.model.materials): a scene lists
+``material``, the law constants ``c1``, ``c2``, ``c3``, its shear modulus ``mu`` and ``Jlim``,
+and takes any other parameter of the law chosen (see snapmem.catalog.registry).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from snapmem.catalog.registry import Parameter, SceneSpec, register
+from snapmem.errors import SnapmemError
+from snapmem.model.materials import LAWS, Law, law_class, law_name
+from snapmem.model.meridian import Meridian, disc, sphere, torus
+from snapmem.model.scene import Scene
+from snapmem.model.terms import Electric, PressureWork, Stretching
+
+def common_parameters(nodes: int, H=None) -> tuple:
+    """``nodes`` and the reference thickness ``H`` [m] (None: set by the scene's defaults)."""
+    return (Parameter("nodes", nodes, "", "number of meridian nodes", int, minimum=3),
+            Parameter("H", H, "m", "reference thickness", minimum=0.0, open_min=True))
+
+
+def with_defaults(params: tuple, **defaults) -> tuple:
+    """The parameters with some defaults replaced, by name."""
+    return tuple(p.with_default(defaults[p.name]) if p.name in defaults else p for p in params)
+
+
+def law_parameter(name: str, **defaults) -> Parameter:
+    """The scene parameter ``name`` as the registered laws declare it: unit and range of the first
+    law that takes it (no range if the laws' ranges differ: each law checks its own), doc naming
+    each law, default of the first law unless given."""
+    declared = [(law, p) for law, (cls, _) in LAWS.items() for p in cls.parameters if p.name == name]
+    first = declared[0][1]
+    same_range = all((p.minimum, p.maximum, p.open_min, p.open_max)
+                     == (first.minimum, first.maximum, first.open_min, first.open_max) for _, p in declared)
+    doc = "; ".join(f"{law}: {p.doc}" for law, p in declared)
+    bounds = {} if same_range else {"minimum": None, "maximum": None, "open_min": False, "open_max": False}
+    return Parameter(**{**first.__dict__, "doc": doc, "default": defaults.get(name, first.default), **bounds})
+
+
+def material_parameters(material="mooney_rivlin", c1=0.4375, c2=0.0625, eps=1.0, mu_unit="Pa",
+                        eps_unit="F/m", pressure_unit="Pa", voltage_unit="V") -> tuple:
+    """The material and load parameters of a membrane scene.
+
+    ``mu`` is the scene's shear modulus: not set, it is 2 (c1 + c2); set, the chosen law is given
+    that modulus (:meth:`~snapmem.model.materials.Law.with_modulus`: Mooney-Rivlin scales c1 and c2
+    keeping c1/c2, Yeoh sets c1 = mu/2, laws with a parameter ``mu`` take it).
+    """
+    constants = tuple(law_parameter(name, c1=c1, c2=c2) for name in ("c1", "c2", "c3"))
+    return (
+        (Parameter("material", material, "", "strain energy law", str),)
+        + tuple(Parameter(**{**p.__dict__, "unit": mu_unit}) for p in constants)
+        + (Parameter("mu", None, mu_unit, "shear modulus; for Mooney-Rivlin scales c1, c2 keeping c1/c2 "
+                     "(default 2 (c1 + c2))", minimum=0.0, open_min=True),
+           law_parameter("Jlim"),
+           Parameter("E_hat", 0.0, "", "normalised electric load (phi/H) sqrt(eps/mu); or set voltage"),
+           Parameter("voltage", None, voltage_unit, "voltage phi across the thickness (instead of E_hat)"),
+           Parameter("eps", eps, eps_unit, "permittivity", minimum=0.0, open_min=True),
+           Parameter("pressure", 0.0, pressure_unit, "pressure difference inside minus outside"))
+    )
+
+
+def scene_law(params: dict) -> Law:
+    """The law of resolved membrane parameters: ``material`` itself if it is a Law instance, else
+    the registered law of that name made from the parameters it declares, given the scene's
+    modulus ``mu`` (default 2 (c1 + c2))."""
+    material = params["material"]
+    if isinstance(material, Law):
+        return material
+    cls = law_class(material)
+    mu = params["mu"] if params["mu"] is not None else 2.0 * (params["c1"] + params["c2"])
+    values = cls.with_modulus({p.name: params[p.name] for p in cls.parameters}, mu)
+    return cls.from_parameters(**values)
+
+
+def _recorded(params: dict, law: Law) -> dict:
+    """The parameters a scene records: for a law given as an instance, its name, its declared
+    parameters and its modulus."""
+    if not isinstance(params["material"], Law):
+        return params
+    return {**params, "material": law_name(law), **{p.name: getattr(law, p.name) for p in type(law).parameters},
+            "mu": law.mu}
+
+
+def build_membrane(params: dict, with_loads: tuple, meridian: Meridian, fixed, name: str,
+                   start_guess=None, probes=None) -> Scene:
+    """Assemble a membrane scene from resolved material and load parameters.
+
+    Includes the electric term only when there is a voltage (or it is asked for).
+    """
+    H = params["H"]
+    law = scene_law(params)
+    voltage = _voltage(params, law.mu)
+    terms = [Stretching(law), PressureWork()]
+    if voltage != 0.0 or "voltage" in with_loads:
+        terms.append(Electric(params["eps"], H))
+    loads = {"pressure": params["pressure"]}
+    if len(terms) == 3:
+        loads["voltage"] = voltage
+    return Scene(meridian, H, terms, fixed=fixed, loads=loads, name=name, parameters=_recorded(params, law),
+                 start_guess=start_guess, probes=probes)
+
+
+def _voltage(params, mu):
+    if params["voltage"] is not None:
+        if params["E_hat"] != 0.0:
+            raise SnapmemError(f"E_hat = {params['E_hat']:g} and voltage = {params['voltage']:g}: "
+                               "set one of them, not both")
+        return params["voltage"]
+    return params["E_hat"] * params["H"] * np.sqrt(mu / params["eps"])
+
+
+# ------------------------------------------------------------------------------------------
+# the validation scenes
+def build_plate(params: dict, with_loads: tuple) -> Scene:
+    """The plate clamped at its rim (rim node: r and z fixed; axis node: r), with a Hencky start guess."""
+    R, H = params["R"], params["H"]
+    meridian = disc(R, params["nodes"])
+    n = meridian.nodes
+    fixed = [0, 1, 2 * (n - 1)]
+
+    def start_guess(loads):
+        """Small-deflection (Hencky) dome: w0 = 0.662 R (p R / (E H))^(1/3), E = 3 mu."""
+        scene_mu = 3.0 * scene_law(params).mu
+        p = abs(loads.get("pressure", 0.0))
+        w0 = 0.662 * R * (p * R / (scene_mu * H)) ** (1.0 / 3.0) if p > 0 else 1e-3 * R
+        q = meridian.q.copy()
+        q[1::2] = np.sign(loads.get("pressure", 1.0) or 1.0) * w0 * (1.0 - (meridian.r / R) ** 2)
+        return q
+
+    return build_membrane(params, with_loads, meridian, fixed, "plate", start_guess=start_guess,
+                          probes={"deflection": lambda q: float(q[-1])})
+
+
+def _balloon(params, with_loads):
+    R = params["R"]
+    meridian = sphere(R, params["nodes"])
+    n = meridian.nodes
+    fixed = [0, 1, 2 * (n - 1)]            # south pole: r and z; north pole: r
+    return build_membrane(params, with_loads, meridian, fixed, "balloon",
+                          probes={"stretch": lambda q: float(q[0::2].max() / R)})
+
+
+def _torus(params, with_loads):
+    Rb, Rs = params["Rb"], params["Rs"]
+    if params["aspect_ratio"] is not None:
+        Rs = params["Rs"] = params["aspect_ratio"] * Rb
+    if Rs >= Rb:
+        raise SnapmemError(f"Rs = {Rs:g}: must be < Rb = {Rb:g} (the cross-section may not reach the axis)")
+    meridian = torus(Rb, Rs, params["nodes"])
+    return build_membrane(params, with_loads, meridian, [1], "torus",
+                          probes={"outer_radius": lambda q: float(q[0::2].max())})
+
+
+register(SceneSpec(
+    "plate", "circular plate clamped at its rim, inflated from one side (paper Fig. 3d)",
+    common_parameters(101, H=0.5)
+    + (Parameter("R", 7.5, "m", "plate radius", minimum=0.0, open_min=True),)
+    + material_parameters(c1=0.4, c2=0.1),
+    build_plate))
+
+register(SceneSpec(
+    "balloon", "spherical balloon, poles on the axis (paper Figs 3e, 4)",
+    common_parameters(101, H=0.1)
+    + (Parameter("R", 10.0, "m", "sphere radius", minimum=0.0, open_min=True),)
+    + material_parameters(),
+    _balloon))
+
+register(SceneSpec(
+    "torus", "toroidal membrane, circle of radius Rs about (Rb, 0) (paper Figs 3f, 5)",
+    common_parameters(100, H=0.1)
+    + (Parameter("Rb", 10.0, "m", "axis to the centre of the cross-section", minimum=0.0, open_min=True),
+       Parameter("Rs", 2.0, "m", "cross-section radius (< Rb)", minimum=0.0, open_min=True),
+       Parameter("aspect_ratio", None, "", "Rs / Rb; if set, Rs = aspect_ratio * Rb", minimum=0.0,
+                 maximum=1.0, open_min=True, open_max=True))
+    + material_parameters(),
+    _torus))
