@@ -94,12 +94,10 @@ def cycles(graph) -> list[list[str]]:
     return out
 
 
-@pytest.mark.xfail(strict=True, reason="the layered split is under way: remove when it passes")
 def test_no_import_cycles():
     assert cycles(imports()) == []
 
 
-@pytest.mark.xfail(strict=True, reason="the layered split is under way: remove when it passes")
 def test_imports_point_down_the_layers():
     upward = [(a, b) for a, targets in imports().items() if a != "snapmem"
               for b in targets if layer(b) > layer(a)]
