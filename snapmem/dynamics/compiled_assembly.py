@@ -14,8 +14,8 @@ import numpy as np
 from numba import njit
 
 from snapmem.kernels.assembly import edge_assembly, edge_stretches, radius_max_step, residual_floor, state_check
-from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step, linear_barrier,
-                                    linear_max_step, linear_min_gap)
+from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,
+                                    linear_barrier, linear_max_step, linear_min_gap)
 from snapmem.kernels.laws import LAW_LINEAR, electric_density, law_admissible, law_density
 from snapmem.model.contact import FRACTION_TO_BOUNDARY
 

@@ -14,7 +14,8 @@ from numba import njit
 from snapmem.dynamics.compiled_assembly import admissible, assemble, max_step, state_ok
 from snapmem.kernels.bordered import bordered_solve
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
-from snapmem.solvers.rules import CUT, converged, converged_at_end, energy_step_accepted, inertia_tolerance
+from snapmem.solvers.rules import (CUT, converged, converged_at_end, energy_step_accepted, inertia_tolerance, max_norm,
+                                   step_length)
 from snapmem.solvers.status import Status
 
 #: How a compiled solve ends (an index into OUTCOMES), or HANDED_BACK: a step whose tangent the
@@ -31,11 +32,6 @@ OUTCOMES = (
     (Status.not_finite, "residual is not finite"),
     (Status.left_domain, "left the model's domain: the starting state is outside it"),
 )
-
-
-@njit(cache=True, nogil=True)
-def _norm(r):
-    return np.max(np.abs(r)) if r.size else 0.0
 
 
 @njit(cache=True, nogil=True)
@@ -66,7 +62,7 @@ def step_newton(guess, fallback, anchor, P, pressure, a_el, inertia, momentum, t
         if not admissible(q, P):
             return q, START_OUTSIDE, 0, 0, np.nan
     energy, residual, lower, border, corner, floor = assemble(q, P, pressure, a_el, inertia, anchor, momentum, 2)
-    norm = _norm(residual)
+    norm = max_norm(residual)
     free = P.free
     last_step = np.inf
     iterations = cuts = 0
@@ -96,7 +92,7 @@ def step_newton(guess, fallback, anchor, P, pressure, a_el, inertia, momentum, t
             if inside:
                 e_t, r_t, lo_t, bo_t, co_t, fl_t = assemble(trial, P, pressure, a_el, inertia, anchor, momentum, 2)
                 inside = e_t < np.inf
-                n_t = _norm(r_t)
+                n_t = max_norm(r_t)
                 if energy_step_accepted(e_t, n_t, energy, norm, alpha, slope):
                     accepted = True
                     break
@@ -107,7 +103,7 @@ def step_newton(guess, fallback, anchor, P, pressure, a_el, inertia, momentum, t
             break
         q, energy, residual, lower, border, corner, floor = trial, e_t, r_t, lo_t, bo_t, co_t, fl_t
         norm = n_t
-        last_step = alpha * np.max(np.abs(dx)) if dx.size else 0.0
+        last_step = step_length(alpha, dx)
     if code != CONVERGED and converged_at_end(norm, tol, floor):
         code = CONVERGED
     return q, code, iterations, cuts, norm

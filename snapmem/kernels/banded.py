@@ -2,11 +2,11 @@
 
 A matrix K of order n and half-bandwidth b is stored as ``lower`` of shape (b + 1, n) with
 K[i, j] = lower[i - j, j] for 0 <= i - j <= b: assembly writes only these entries, a third of
-LAPACK's general-band storage for b = 3 (why that matters: docs/performance.md). Solves factorise K as L D L^T without pivoting
-(a compiled kernel on the lower band) wherever that is stable: its element growth is measured
-and, if large (a small pivot inside an indefinite K, which Cholesky could not factor at all) or a
-pivot is zero, LAPACK's band LU with partial pivoting is used instead, on the general-band
-storage built for it.
+LAPACK's general-band storage for b = 3 (why that matters: docs/performance.md). Solves
+factorise K as L D L^T without pivoting (a compiled kernel on the lower band) wherever that is
+stable: its element growth is measured and, if large (a small pivot inside an indefinite K,
+which Cholesky could not factor at all) or a pivot is zero, LAPACK's band LU with partial
+pivoting is used instead, on the general-band storage built for it.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import numpy as np
 from scipy.linalg import eig_banded
 from scipy.linalg.lapack import dgbtrf, dgbtrs
 
-from snapmem.kernels.linalg import (REFINE_ALWAYS, band_ldlt, band_ldlt_solve, band_matvec, needs_refinement, orthonormal,
-                                   ritz_step)
+from snapmem.kernels.linalg import (REFINE_ALWAYS, band_ldlt, band_ldlt_solve, band_matvec, needs_refinement,
+                                   orthonormal, ritz_step)
 
 #: Largest element growth of the LDL^T factors (``snapmem.kernels.band_ldlt``: 1 for a positive
 #: definite K) at which they are used for solves; beyond it the pivoted band LU is. At 1e3 the

@@ -26,8 +26,8 @@ from snapmem.model.dofs import DofMap, node_areas
 from snapmem.model.kinematics import EdgeKinematics, density_chain_rule
 from snapmem.model.materials import Density
 from snapmem.model.meridian import Meridian
-from snapmem.model.terms import (DensityTerm, EdgeTerm, Electric, NodeTerm, PressureDeclaration, PressureWork, Stretching,
-                                 Term)
+from snapmem.model.terms import (DensityTerm, EdgeTerm, Electric, NodeTerm, PressureDeclaration, PressureWork,
+                                 Stretching, Term)
 
 
 @dataclass

@@ -1,12 +1,13 @@
 """Newton's method on a scene's residual, and equilibria reached by loading from rest.
 
 Each iteration is one assembly (gradient and banded K at the trial point) and one band
-factorisation and solve. The step is cut (i) to keep free radii positive (fraction to the boundary), (ii) by
-halving until the trial state is inside the model's domain (Gent lock, collapsed edges), and
-(iii) by halving until the residual norm falls (Armijo on |R|^2, for which the Newton
-direction is always a descent direction). The acceptance rules and their constants are
-:mod:`snapmem.solvers.rules`, shared with the compiled time step. The assembly at an accepted trial point is the next
-iteration's, so an iteration costs one assembly unless a step is cut.
+factorisation and solve. The step is cut (i) to keep free radii positive (fraction to the
+boundary), (ii) by halving until the trial state is inside the model's domain (Gent lock,
+collapsed edges), and (iii) by halving until the residual norm falls (Armijo on |R|^2, for which
+the Newton direction is always a descent direction). The acceptance rules and their constants
+are :mod:`snapmem.solvers.rules`, shared with the compiled time step. The assembly at an
+accepted trial point is the next iteration's, so an iteration costs one assembly unless a step
+is cut.
 """
 
 from __future__ import annotations
@@ -124,7 +125,7 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
                                      f"left the model's domain: the starting state is outside it ({why})",
                                      status=Status.left_domain)
     ev = residual_and_jacobian(q)
-    norm = _norm(ev.residual)
+    norm = rules.max_norm(ev.residual)
     last_step = np.inf
     report = NewtonReport(False, 0, norm, "max iterations", status=Status.max_iterations)
     for _ in range(options.max_iterations):
@@ -153,7 +154,7 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
             if outside is None:
                 ev_trial = residual_and_jacobian(trial)
                 if merit == "energy":
-                    if rules.energy_step_accepted(ev_trial.energy, _norm(ev_trial.residual), ev.energy, norm,
+                    if rules.energy_step_accepted(ev_trial.energy, rules.max_norm(ev_trial.residual), ev.energy, norm,
                                                   alpha, slope):
                         break
                 elif rules.residual_step_accepted(float(ev_trial.residual @ ev_trial.residual), squared, alpha):
@@ -169,16 +170,12 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
                 report.status = Status.left_domain
             break
         q, ev = trial, ev_trial
-        norm = _norm(ev.residual)
-        last_step = alpha * float(np.abs(dx).max()) if dx.size else 0.0
+        norm = rules.max_norm(ev.residual)
+        last_step = rules.step_length(alpha, dx)
     report.residual_norm = norm
     if not report.converged and rules.converged_at_end(norm, tol, ev.residual_floor):
         report.converged, report.reason, report.status = True, "converged", Status.converged
     return q, ev, report
-
-
-def _norm(r: np.ndarray) -> float:
-    return float(np.abs(r).max()) if r.size else 0.0
 
 
 @dataclass

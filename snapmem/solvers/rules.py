@@ -32,6 +32,18 @@ RULES = NewtonRules(ARMIJO, CUT, STALL_FACTOR, STALL_STEP, RESIDUAL_FALL, INERTI
 
 
 @njit(cache=True, nogil=True)
+def max_norm(r):
+    """max |r_i| (0 for an empty r; NaN if r has one): the residual norm both solves converge in."""
+    return np.max(np.abs(r)) if r.size else 0.0
+
+
+@njit(cache=True, nogil=True)
+def step_length(alpha, dx):
+    """max |alpha dx_i| of an accepted step (0 for an empty dx): what :func:`converged` compares with |q|."""
+    return alpha * np.max(np.abs(dx)) if dx.size else 0.0
+
+
+@njit(cache=True, nogil=True)
 def converged(norm, tol, floor, last_step, q):
     """Whether max |R| = ``norm`` [N] is converged: at most max(tol, floor) (the tolerance, or the
     residual's rounding floor), or within STALL_FACTOR of that while the last Newton step was at the
