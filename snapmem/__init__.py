@@ -16,6 +16,7 @@ from snapmem import _moved
 _moved.install()                 # the flat module paths of snapmem 0.1 keep working
 
 from snapmem.errors import SnapmemError, SolverError
+from snapmem.kernels.switch import reference_path
 from snapmem.model.materials import Gent, Law, InvariantLaw, MooneyRivlin, NeoHookean, Yeoh, LAWS, make_law, register_law
 from snapmem.model.meridian import Meridian, disc, sphere, torus
 from snapmem.solvers.newton import Equilibrium, NewtonOptions, NewtonReport, solve
@@ -32,5 +33,6 @@ __all__ = [
     "Scene", "Stretching", "Electric", "PressureWork",
     "Equilibrium", "NewtonOptions", "NewtonReport", "equilibrium", "solve",
     "SCENES", "SceneSpec", "Parameter", "build_scene", "register",
+    "reference_path",
 ]
 from snapmem._version import __version__  # noqa: E402

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+import snapmem
 from snapmem.model.meridian import disc, sphere, torus
 
 
@@ -23,3 +24,10 @@ SHAPES = {
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture
+def reference_path():
+    """Run the test on the numpy reference path (``snapmem.reference_path()``): no optional compiled kernel."""
+    with snapmem.reference_path():
+        yield

@@ -17,7 +17,7 @@ def test_band_storage_solve_and_eigenvalues_match_dense(name):
     x = rng.normal(size=K.n)
     np.testing.assert_allclose(K.matvec(x), dense @ x, atol=1e-12 * np.abs(dense).max())
     rhs = rng.normal(size=(K.n, 2))
-    np.testing.assert_allclose(dense @ K.lu().solve(rhs), rhs, atol=1e-9)
+    np.testing.assert_allclose(dense @ K.factor().solve(rhs), rhs, atol=1e-9)
     eig = np.linalg.eigvalsh(dense)
     np.testing.assert_allclose(K.smallest_eigenvalues(3), eig[:3], atol=1e-10 * np.abs(eig).max())
     assert K.negative_count() == np.count_nonzero(eig < 0)
@@ -65,7 +65,7 @@ def test_eigenvalues_near_zero_match_dense(name):
 def test_ldlt_solves_where_stable_and_carries_the_inertia(b, shift):
     dense = _random_band(80, b, shift, seed=b)
     K = BandedMatrix.from_dense(dense, b)
-    lu = K.lu()
+    lu = K.factor()
     rhs = np.random.default_rng(0).normal(size=(80, 3))
     x = lu.solve(rhs)
     assert np.abs(dense @ x - rhs).max() <= 1e-12 * np.abs(dense).max() * np.abs(x).max()
@@ -87,7 +87,7 @@ def test_ldlt_falls_back_to_pivoted_lu_on_a_zero_or_tiny_pivot(pivot):
     from snapmem.kernels.linalg import band_ldlt
     _, _, zero, growth = band_ldlt(K.lower(), 3)
     assert zero == 1 if pivot == 0 else growth > 1e10
-    lu = K.lu()
+    lu = K.factor()
     assert isinstance(lu, BandedLU) and not lu.singular
     rhs = np.arange(40.0)
     x = lu.solve(rhs)
@@ -105,5 +105,35 @@ def test_bordered_solve_reuses_the_inner_factorisation_and_is_accurate_at_a_sing
     M = BorderedMatrix(K, border, border, [[0.0]])
     rhs = np.linspace(-1.0, 1.0, 31)
     exact = np.linalg.solve(M.to_dense(), rhs)
-    for lu in (M.lu(), M.lu(K.lu())):
+    for lu in (M.factor(), M.factor(K.factor())):
         np.testing.assert_allclose(lu.solve(rhs), exact, rtol=0, atol=1e-9 * np.abs(exact).max())
+
+
+def test_refinement_policy_is_an_argument_of_both_bordered_solves():
+    """BorderedLU and the compiled bordered_solve take the same REFINE_* policies: at a fold (the
+    Schur complement a small difference of large terms) cancellation asks for the refinement step."""
+    from snapmem.kernels.bordered import bordered_solve
+    from snapmem.kernels.linalg import REFINE_ALWAYS, REFINE_NEVER, REFINE_ON_CANCELLATION, needs_refinement
+    K = BandedMatrix.from_dense(_random_band(30, 3, 10.0, seed=4), 3)          # positive definite band
+    border = np.linspace(0.5, 1.5, 30)
+    corner = float(border @ np.linalg.solve(K.to_dense(), border)) * (1.0 + 1e-7)   # S = 1e-7 of its terms
+    M = BorderedMatrix(K, border, border, [[corner]])
+    rhs = np.linspace(-1.0, 1.0, 31)
+    exact = np.linalg.solve(M.to_dense(), rhs)
+    for policy in (REFINE_NEVER, REFINE_ON_CANCELLATION, REFINE_ALWAYS):
+        lu = M.factor(refine=policy)
+        np.testing.assert_allclose(lu.solve(rhs), exact, rtol=0, atol=1e-6 * np.abs(exact).max())
+        x, ok = bordered_solve(K.lower(), border[None, :], np.array([[corner]]), rhs, policy)
+        assert ok
+        np.testing.assert_allclose(x, exact, rtol=0, atol=1e-6 * np.abs(exact).max())
+        assert lu.refine == policy
+    S, terms = np.array([[1e-9]]), np.array([[1.0]])
+    assert [needs_refinement(p, S, terms) for p in (REFINE_NEVER, REFINE_ON_CANCELLATION, REFINE_ALWAYS)] == [
+        False, True, True]
+    assert not needs_refinement(REFINE_ON_CANCELLATION, np.array([[0.5]]), terms)
+
+
+def test_lu_is_the_documented_alias_of_factor():
+    K = BandedMatrix.from_dense(_random_band(12, 2, 5.0, seed=1), 2)
+    assert BandedMatrix.lu is BandedMatrix.factor and BorderedMatrix.lu is BorderedMatrix.factor
+    assert type(K.lu()) is type(K.factor())

@@ -5,10 +5,13 @@ iterates, the same recorded frames, and the general path wherever a term is not 
 import numpy as np
 import pytest
 
+import snapmem
 import snapmem.dynamics.compiled_step as compiled_step
+from snapmem.dynamics.compiled_newton import HANDED_BACK
 from snapmem.kernels.banded import BandedMatrix
-from snapmem.kernels.bordered import BodyMatrix
-from snapmem.dynamics.compiled_step import CompiledStep, bordered_solve
+from snapmem.kernels.bordered import BodyMatrix, bordered_solve
+from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
+from snapmem.dynamics.compiled_step import CompiledStep
 from snapmem.model.contact import contact_report
 from snapmem.dynamics.driver import _Stepper, lumped_masses, simulate
 from snapmem.catalog.robots import events, experiment
@@ -92,7 +95,7 @@ def test_bordered_solve_against_dense(k):
     corner = corner + corner.T - 50 * np.eye(k)           # an indefinite whole: the Schur is negative
     M = np.block([[A, border.T], [border, corner]])
     rhs = rng.standard_normal(n + k)
-    x, ok = bordered_solve(np.asfortranarray(lower), border, corner, rhs)
+    x, ok = bordered_solve(np.asfortranarray(lower), border, corner, rhs, REFINE_ON_CANCELLATION)
     assert ok
     assert np.max(np.abs(x - np.linalg.solve(M, rhs))) <= 1e-12 * np.max(np.abs(x))
 
@@ -102,11 +105,11 @@ def test_bordered_solve_hands_back_what_ldlt_cannot_take():
     lower = np.zeros((b + 1, n))
     lower[0] = [1e-12, 1.0, 1.0, 1.0, 1.0, 1.0]          # a tiny pivot before a large coupling: growth
     lower[1, :-1] = 1.0
-    _, ok = bordered_solve(lower, np.zeros((0, n)), np.zeros((0, 0)), np.ones(n))
+    _, ok = bordered_solve(lower, np.zeros((0, n)), np.zeros((0, 0)), np.ones(n), REFINE_ON_CANCELLATION)
     assert not ok
     lower[0, 0] = 2.0
     border, corner = np.zeros((1, n)), np.zeros((1, 1))   # singular: a body coupled to nothing, no mass
-    _, ok = bordered_solve(lower, border, corner, np.ones(n + 1))
+    _, ok = bordered_solve(lower, border, corner, np.ones(n + 1), REFINE_ON_CANCELLATION)
     assert not ok
 
 
@@ -120,17 +123,15 @@ def test_newton_solve_matches_the_general_path():
     damping = ex.damping * mass
     v = np.zeros_like(q)
     v[s.free[: s.n_band]] = 0.05 * np.random.default_rng(4).standard_normal(s.n_band)
-    results = []
-    for enabled in (True, False):
-        compiled_step.enabled = enabled
-        try:
-            stepper = _Stepper(s, mass, damping, ex.options)
-            assert (stepper.compiled is not None) == enabled
-            results.append(stepper.solve(q, v, 1e-3, loads))
-        finally:
-            compiled_step.enabled = True
-    (y_c, rep_c), (y_p, rep_p) = results
+    stepper = _Stepper(s, mass, damping, ex.options)
+    assert stepper.compiled is not None
+    y_c, rep_c = stepper.solve(q, v, 1e-3, loads)
+    with snapmem.reference_path():
+        stepper = _Stepper(s, mass, damping, ex.options)
+        assert stepper.compiled is None
+        y_p, rep_p = stepper.solve(q, v, 1e-3, loads)
     assert rep_c.converged and rep_p.converged
+    assert rep_c.status == rep_p.status == "converged"
     assert rep_c.iterations == rep_p.iterations >= 3
     assert rep_c.step_cuts == rep_p.step_cuts
     assert np.max(np.abs(y_c - y_p)) <= 1e-12 * s.meridian.size
@@ -138,15 +139,14 @@ def test_newton_solve_matches_the_general_path():
 
 def test_simulation_matches_the_general_path():
     ex = experiment("ball_throw")
-    runs = []
-    for enabled in (True, False):
-        compiled_step.enabled = enabled
-        try:
-            runs.append(simulate(ex.scene, ex.loads, 1.7, rho=ex.rho, damping=ex.damping, q0=ex.q0,
-                                 options=ex.options, damp_bodies=ex.damp_bodies))
-        finally:
-            compiled_step.enabled = True
-    fast, general = runs
+
+    def run():
+        return simulate(ex.scene, ex.loads, 1.7, rho=ex.rho, damping=ex.damping, q0=ex.q0, options=ex.options,
+                        damp_bodies=ex.damp_bodies)
+
+    fast = run()
+    with snapmem.reference_path():
+        general = run()
     assert fast.meta["newton_iterations"] == general.meta["newton_iterations"]
     assert fast.data.keys() == general.data.keys()
     for key in ("q", "potential", "ball_force", "plane_gap", "min_gap"):
@@ -155,19 +155,18 @@ def test_simulation_matches_the_general_path():
     assert ev_f["snap"] == pytest.approx(ev_g["snap"], rel=1e-9)
 
 
-def test_uncovered_terms_take_the_general_path():
+def test_uncovered_terms_take_the_general_path(reference_path):
+    assert CompiledStep.of(experiment("ball_drop").scene) is None                       # the reference path
+
+
+def test_a_term_without_a_declaration_takes_the_general_path():
     assert CompiledStep.of(experiment("pump", material="yeoh", c1=0.5).scene) is None     # a law it does not know
-    compiled_step.enabled = False
-    try:
-        assert CompiledStep.of(experiment("ball_drop").scene) is None
-    finally:
-        compiled_step.enabled = True
 
 
 def test_domain_is_the_scenes_at_gents_lock():
     """The plate stretched equibiaxially past the Gent lock (I1 - 3 = 2 lam^2 + lam^-4 - 3 = Jlim = 270
     at lam = 11.7) leaves the domain; short of it, it is inside: as Scene.inadmissible says."""
-    from snapmem.dynamics.compiled_step import admissible
+    from snapmem.dynamics.compiled_assembly import admissible
     ex = experiment("pump")
     s = ex.scene
     step = CompiledStep.of(s)
@@ -183,16 +182,13 @@ def test_a_step_handed_back_runs_on_the_general_path(monkeypatch):
     then solves it by the general Newton, and the run is the general path's."""
     ex = experiment("gripper_rod")
     kwargs = dict(rho=ex.rho, damping=ex.damping, q0=ex.q0, options=ex.options, damp_bodies=ex.damp_bodies)
-    compiled_step.enabled = False
-    try:
+    with snapmem.reference_path():
         general = simulate(ex.scene, ex.loads, 5.0, **kwargs)
-    finally:
-        compiled_step.enabled = True
     calls = []
 
     def hand_back(*args):
         calls.append(1)
-        return args[0], compiled_step.HANDED_BACK, 0, 0, np.nan
+        return args[0], HANDED_BACK, 0, 0, np.nan
 
     monkeypatch.setattr(compiled_step, "time_step", hand_back)
     handed = simulate(ex.scene, ex.loads, 5.0, **kwargs)

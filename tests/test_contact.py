@@ -137,7 +137,7 @@ def test_bordered_matrix_matches_dense():
     assert M.n == n + k
     x = rng.normal(size=n + k)
     np.testing.assert_allclose(M.matvec(x), D @ x, rtol=1e-12, atol=1e-12)
-    lu = M.lu()
+    lu = M.factor()
     np.testing.assert_allclose(lu.solve(D @ x), x, rtol=1e-9, atol=1e-9)
     X = rng.normal(size=(n + k, 3))
     np.testing.assert_allclose(lu.solve(D @ X), X, rtol=1e-9, atol=1e-9)

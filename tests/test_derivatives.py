@@ -137,25 +137,23 @@ def test_every_law_declares_its_parameters_and_an_example(law):
 @pytest.mark.parametrize("name,extra", [("balloon", {"E_hat": 0.2}), ("torus", {}),
                                         ("plate", {"material": "gent", "Jlim": 20.0}),
                                         ("balloon", {"material": "yeoh", "c2": -0.01, "c3": 0.002})])
-def test_compiled_assembly_matches_the_numpy_reference(name, extra, rng, monkeypatch):
+def test_compiled_assembly_matches_the_numpy_reference(name, extra, rng):
     """The compiled kernels (snapmem.kernels) against the numpy expressions they fuse."""
     from snapmem import build_scene
     scene = build_scene(name, nodes=41, pressure=0.013, **extra)
     assert scene._compilable
     q = scene.reference_state() * 1.2
     q[scene.free] += rng.normal(scale=0.05, size=scene.n_free)
-    assert_compiled_matches_numpy(scene, q, monkeypatch, 1e-13)
+    assert_compiled_matches_numpy(scene, q, 1e-13)
 
 
-def assert_compiled_matches_numpy(scene, q, monkeypatch, tol):
+def assert_compiled_matches_numpy(scene, q, tol):
     """The scene's energy, gradient and stiffness at q by the compiled kernels and by numpy."""
-    from snapmem.model import kinematics, materials
+    import snapmem
     fast = scene.evaluate(q)
-    monkeypatch.setattr(Scene, "compiled", False)
-    monkeypatch.setattr(materials, "compiled_chain", False)
-    monkeypatch.setattr(kinematics, "compiled", False)
     scene._kinematics_cache = None
-    slow = scene.evaluate(q)
+    with snapmem.reference_path():
+        slow = scene.evaluate(q)
     assert fast.energy == pytest.approx(slow.energy, rel=1e-13)
     np.testing.assert_allclose(fast.gradient, slow.gradient, rtol=0, atol=tol * np.abs(slow.gradient).max())
     K1, K2 = fast.stiffness.to_dense(), slow.stiffness.to_dense()
@@ -173,7 +171,7 @@ def test_laws_take_scalars_and_arrays_alike(law):
 
 
 @pytest.mark.parametrize("name,t_end", [("ball_drop", 0.3), ("gripper_rod", 18.0)])
-def test_compiled_assembly_matches_the_numpy_reference_with_contact(name, t_end, monkeypatch):
+def test_compiled_assembly_matches_the_numpy_reference_with_contact(name, t_end):
     """Scenes with node terms and a rigid body: the compiled membrane plus the node terms against the
     numpy membrane plus the same node terms, at a state in contact (ball pressing; torus on its rod)."""
     from snapmem.model.contact import contact_report
@@ -181,4 +179,4 @@ def test_compiled_assembly_matches_the_numpy_reference_with_contact(name, t_end,
     scene = experiment(name, nodes=31).scene
     q = run(name, nodes=31, t_end=t_end).final_q
     assert any(v > 0 for k, v in contact_report(scene, q).items() if k.endswith("_force"))
-    assert_compiled_matches_numpy(scene, q, monkeypatch, 1e-12)
+    assert_compiled_matches_numpy(scene, q, 1e-12)

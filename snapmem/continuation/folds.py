@@ -102,7 +102,7 @@ def _fold_by_trace(scene, control, options, trace_options):
 
 
 def _null_vector(K):
-    lu = K.lu()
+    lu = K.factor()
     phi = np.random.default_rng(1).normal(size=K.n)
     if not lu.singular:
         for _ in range(3):

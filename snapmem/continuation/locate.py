@@ -181,7 +181,7 @@ def _classify(tracer, c: Point, base: Point, p: Point) -> PointKind:
     else:
         _, J = pb.evaluate(c.x, c.lam)
         K = pb.stiffness(J)
-        lu = K.lu()
+        lu = K.factor()
         phi = np.random.default_rng(0).normal(size=K.n)
         if not lu.singular:
             for _ in range(3):                       # inverse iteration: K is (nearly) singular here
@@ -236,7 +236,7 @@ def fold_newton(pb, scene, x, lam, phi, options):
             return None
         F, K = pb.evaluate(x, lam)
         border = BorderedMatrix(K, phi, phi, [[0.0]])
-        lu = border.lu()
+        lu = border.factor()
         if lu.singular:
             return None
         rhs = np.zeros(K.n + 1)
@@ -254,7 +254,7 @@ def fold_newton(pb, scene, x, lam, phi, options):
             return None
         converged = np.max(np.abs(F)) <= tol
         J = BorderedMatrix(K, Fl, g_x, [[g_l]])
-        lu = J.lu()
+        lu = J.factor()
         if lu.singular:
             return None
         d = lu.solve(-np.append(F, g))

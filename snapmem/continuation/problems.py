@@ -84,7 +84,7 @@ class LoadProblem:
     def factorise(self, J):
         """(a factorisation of the Jacobian J, one of K within it): made once per point and shared
         by the tangent and the stability computation."""
-        lu = J.lu()
+        lu = J.factor()
         return lu, lu
 
     def stability(self, K, x, lam, n_eigs, start=None, tol=1e-10, sweeps=40, lu=None):
@@ -95,7 +95,7 @@ class LoadProblem:
         inverse iterations; ``lu``, K's factorisation if already made.
         """
         if lu is None:
-            lu = K.lu()
+            lu = K.factor()
         eigs, vectors, subspace = eigenvalues_near_zero(K, n_eigs, start, lu, tol, max_iterations=sweeps,
                                                         subspace=True)
         negative = getattr(lu, "negative", None)          # the band factorisations carry the inertia
@@ -199,13 +199,13 @@ class VolumeProblem(LoadProblem):
         return d
 
     def factorise(self, J):
-        inner = J.A.lu()
-        return J.lu(inner), inner
+        inner = J.A.factor()
+        return J.factor(inner), inner
 
     def stability(self, J, x, lam, n_eigs, start=None, tol=1e-10, sweeps=40, lu=None):
         K = J.A
         if lu is None:
-            lu = K.lu()
+            lu = K.factor()
         eigs, neg, vectors, subspace = super().stability(K, x, lam, n_eigs, start, tol, sweeps, lu)
         g = J.C[:, 0]
         if g @ lu.solve(g) < 0:

@@ -67,7 +67,7 @@ class Tracer:
         else:
             row, corner = self.wx * previous[:-1], [[self.wl * previous[-1]]]
         M = BorderedMatrix(J, Fl, row, corner)
-        lu = M.lu(lu)
+        lu = M.factor(lu)
         if lu.singular:
             raise SolverError("singular extended Jacobian: cannot compute the tangent")
         rhs = np.zeros(x.size + 1)
@@ -104,7 +104,7 @@ class Tracer:
             if it == self.opt.max_corrector_iterations:
                 return None, f"corrector did not converge in {it} iterations (|R| = {norm:.2e})"
             M = BorderedMatrix(J, self.pb.dF_dlam(x, lam), row, corner)
-            lu = M.lu()
+            lu = M.factor()
             if lu.singular:
                 return None, "singular extended Jacobian"
             d = lu.solve(-np.append(F, g))

@@ -37,7 +37,7 @@ class _Stepper:
         self._mass_free, self._damping_free = mass[self.free], damping[self.free]
         self._size = scene.meridian.size
         # the whole Newton solve in one compiled call where the scene's terms allow it
-        self.compiled = (CompiledStep.of(scene) if scene.compiled and options.line_search == "energy" else None)
+        self.compiled = CompiledStep.of(scene) if options.line_search == "energy" else None
 
     def solve(self, q, v, h, loads, current=None):
         """y minimising the incremental potential of step h from (q, v); (y, report).

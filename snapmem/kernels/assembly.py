@@ -6,6 +6,30 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+_EPS = np.finfo(np.float64).eps
+
+
+@njit(cache=True, nogil=True, inline="always")
+def swept_volume(ra, rb, dz, scale):
+    """The volume an edge sweeps about the axis, V_e = (pi/3)(r_a^2 + r_a r_b + r_b^2)(z_b - z_a)
+    [m^3], with the parts of ``scale`` dV_e/d(r_a, z_a, r_b, z_b) = (ga dz, -s, gb dz, s):
+    returns (V_e, c, s, ga, gb), c = scale pi/3 (the Hessian's entries are c dz, 2 c dz, +-ga, +-gb).
+
+    The one formula of the swept volume: PressureWork.volume_local (numpy, through ``.py_func``),
+    :func:`edge_assembly`, :func:`volume_gradient` and the compiled step's measures use it.
+    """
+    c0 = np.pi / 3.0
+    s = ra * ra + ra * rb + rb * rb
+    c = c0 * scale
+    return c0 * s * dz, c, c * s, c * (2.0 * ra + rb), c * (ra + 2.0 * rb)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def residual_floor(n_nodes, force):
+    """The residual's rounding floor [N]: 64 eps N max|edge force entry| (nodal forces are sums of
+    edge forces computed from coordinate differences; see snapmem.model.scene.Evaluation)."""
+    return 64.0 * _EPS * n_nodes * force
+
 
 @njit(cache=True, nogil=True, inline="always")
 def _invariant_derivatives(l1, l2):
@@ -70,7 +94,6 @@ def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12
     band = np.zeros(n_band_entries + 1 if order >= 2 else 1)
     volume = 0.0
     force = 0.0                       # largest edge force entry (for the rounding floor)
-    c0 = np.pi / 3.0
     H = np.empty(16)
     for e in range(n_edges):
         a, b = edges[e, 0], edges[e, 1]
@@ -83,11 +106,8 @@ def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12
         h = 0.5 * inv_mid_radius[e]
         wt = weight[e]
         a1, a2 = wt * w1[e], wt * w2[e]
-        s = ra * ra + ra * rb + rb * rb
-        volume += c0 * s * dz
-        c = -pressure * c0
-        sp = c * s
-        ga, gb = c * (2.0 * ra + rb), c * (ra + 2.0 * rb)
+        swept, c, sp, ga, gb = swept_volume(ra, rb, dz, -pressure)
+        volume += swept
         g0, g1, g2, g3 = a2 * h - a1 * u + ga * dz, -a1 * v - sp, a2 * h + a1 * u + gb * dz, a1 * v + sp
         gradient[2 * a] += g0
         gradient[2 * a + 1] += g1
@@ -203,17 +223,16 @@ def state_check(q, radius_dofs):
 @njit(cache=True, nogil=True)
 def volume_gradient(q, edges, n_dof):
     """dV/dq of the swept volume V = sum_e (pi/3)(r_a^2 + r_a r_b + r_b^2)(z_b - z_a), shape (n_dof,)
-    [m^2]: the pressure's load derivative (the same formulas as PressureWork.volume_local)."""
+    [m^2]: the pressure's load derivative (:func:`swept_volume`)."""
     g = np.zeros(n_dof)
-    c = np.pi / 3.0
     for e in range(edges.shape[0]):
         a, b = edges[e, 0], edges[e, 1]
         ra, za, rb, zb = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
         dz = zb - za
-        s = c * (ra * ra + ra * rb + rb * rb)
-        g[2 * a] += c * (2.0 * ra + rb) * dz
+        _, _, s, ga, gb = swept_volume(ra, rb, dz, 1.0)
+        g[2 * a] += ga * dz
         g[2 * a + 1] -= s
-        g[2 * b] += c * (ra + 2.0 * rb) * dz
+        g[2 * b] += gb * dz
         g[2 * b + 1] += s
     return g
 

@@ -2,12 +2,11 @@
 
 A matrix K of order n and half-bandwidth b is stored as ``lower`` of shape (b + 1, n) with
 K[i, j] = lower[i - j, j] for 0 <= i - j <= b: assembly writes only these entries, a third of
-LAPACK's general-band storage for b = 3 (the sizes where the band outgrows the caches were
-measured 35-50% slower per dof in that storage). Solves factorise K as L D L^T without pivoting
-(a compiled kernel on the lower band) wherever that is stable: its element growth is measured
-and, if large (a small pivot inside an indefinite K, which Cholesky could not factor at all) or a
-pivot is zero, LAPACK's band LU with partial pivoting is used instead, on the general-band
-storage built for it.
+LAPACK's general-band storage for b = 3 (why that matters: docs/performance.md). Solves
+factorise K as L D L^T without pivoting (a compiled kernel on the lower band) wherever that is
+stable: its element growth is measured and, if large (a small pivot inside an indefinite K,
+which Cholesky could not factor at all) or a pivot is zero, LAPACK's band LU with partial
+pivoting is used instead, on the general-band storage built for it.
 """
 
 from __future__ import annotations
@@ -16,7 +15,8 @@ import numpy as np
 from scipy.linalg import eig_banded
 from scipy.linalg.lapack import dgbtrf, dgbtrs
 
-from snapmem.kernels.linalg import band_ldlt, band_ldlt_solve, band_matvec, orthonormal, ritz_step# numba: compiled on first use
+from snapmem.kernels.linalg import (REFINE_ALWAYS, band_ldlt, band_ldlt_solve, band_matvec, needs_refinement,
+                                   orthonormal, ritz_step)
 
 #: Largest element growth of the LDL^T factors (``snapmem.kernels.band_ldlt``: 1 for a positive
 #: definite K) at which they are used for solves; beyond it the pivoted band LU is. At 1e3 the
@@ -92,13 +92,16 @@ class BandedMatrix:
         """Lower symmetric band form (b + 1, n) as ``scipy.linalg.eig_banded`` takes it (the storage itself)."""
         return self._lower
 
-    def lu(self):
+    def factor(self):
         """A factorisation for solves, with the inertia: :class:`BandedLDLT` where it is stable
         (no zero pivot, growth at most :data:`LDLT_GROWTH_LIMIT`), else :meth:`pivoted_lu`."""
         F, negative, zero, growth = band_ldlt(self.lower(), self.b)
         if zero == 0 and growth <= LDLT_GROWTH_LIMIT:
             return BandedLDLT(F, negative)
         return self.pivoted_lu(negative)
+
+    #: The former name of :meth:`factor` (which is mostly an LDL^T, not an LU), kept for callers outside the package.
+    lu = factor
 
     def pivoted_lu(self, negative: int | None = None) -> "BandedLU":
         """LU factorisation with partial pivoting (LAPACK dgbtrf) of this matrix in general-band storage."""
@@ -121,10 +124,9 @@ class BandedMatrix:
         """
         return eigenvalues_near_zero(self, k, start, lu, tol, max_iterations=max_iterations)
 
-    def negative_count(self, known: np.ndarray | None = None) -> int:
+    def negative_count(self) -> int:
         """Number of negative eigenvalues (the inertia index), from the pivot signs of a band
-        LDL^T factorisation (Sylvester): O(n b^2). ``known`` is accepted for compatibility and ignored.
-        """
+        LDL^T factorisation (Sylvester): O(n b^2)."""
         return int(band_ldlt(self.lower(), self.b)[1])
 
 
@@ -163,7 +165,10 @@ class BorderedMatrix:
     Continuation's extended systems have this shape (A = K, B = dR/dlambda, C = the tangent), as
     does volume control (B = C = grad V). Solved by block elimination with one step of iterative
     refinement (BEMW, Govaerts & Pryce 1990), which stays accurate when A is singular but the
-    whole matrix is not: at a fold K is singular and the arclength system is regular.
+    whole matrix is not: at a fold K is singular and the arclength system is regular. The
+    refinement policy is an argument of :meth:`factor` (:data:`snapmem.kernels.linalg.REFINE_ALWAYS`
+    by default; the compiled bordered solve, :func:`snapmem.kernels.bordered.bordered_solve`,
+    takes the same policies).
 
     Parameters
     ----------
@@ -195,9 +200,13 @@ class BorderedMatrix:
     def to_dense(self) -> np.ndarray:
         return np.block([[self.A.to_dense(), self.B], [self.C.T, self.D]])
 
-    def lu(self, inner=None) -> "BorderedLU":
-        """Block factorisation; ``inner``, a factorisation of A already made, is reused."""
-        return BorderedLU(self, inner)
+    def factor(self, inner=None, refine: int = REFINE_ALWAYS) -> "BorderedLU":
+        """Block factorisation; ``inner``, a factorisation of A already made, is reused; ``refine``
+        is the refinement policy of its solves (a ``REFINE_*`` of :mod:`snapmem.kernels.linalg`)."""
+        return BorderedLU(self, inner, refine)
+
+    #: The former name of :meth:`factor`, kept for callers outside the package.
+    lu = factor
 
     def eigenvalues_near_zero(self, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13,
                               max_iterations: int = 40):
@@ -206,13 +215,16 @@ class BorderedMatrix:
 
 
 class BorderedLU:
-    """Factorisation of a :class:`BorderedMatrix`: a factorisation of A and the k x k Schur complement."""
+    """Factorisation of a :class:`BorderedMatrix`: a factorisation of A and the k x k Schur
+    complement; ``refine`` is the refinement policy of :meth:`solve` (a ``REFINE_*`` of
+    :mod:`snapmem.kernels.linalg`)."""
 
-    def __init__(self, M: BorderedMatrix, inner=None):
+    def __init__(self, M: BorderedMatrix, inner=None, refine: int = REFINE_ALWAYS):
         self.M = M
-        self.inner = M.A.lu() if inner is None else inner
+        self.inner = M.A.factor() if inner is None else inner
         self.Z = self.inner.solve(M.B)                   # A^-1 B, (n, k)
         self.S = M.D - M.C.T @ self.Z                      # Schur complement (k, k)
+        self.refine = refine
         self.singular = bool(self.inner.singular or not np.all(np.isfinite(self.S))
                              or (self.S.shape == (1, 1) and self.S[0, 0] == 0.0))
 
@@ -227,16 +239,22 @@ class BorderedLU:
         return x
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """Solve M x = rhs (rhs of shape (n,) or (n, m)); one refinement step."""
+        """Solve M x = rhs (rhs of shape (n,) or (n, m)), with one refinement step where the policy asks for it."""
         x = self._eliminate(rhs)
+        if self.refine != REFINE_ALWAYS and not needs_refinement(self.refine, self.S, self._terms()):
+            return x
         return x + self._eliminate(rhs - self.M.matvec(x))
+
+    def _terms(self) -> np.ndarray:
+        """|D| + |C^T Z| entrywise: the size of the terms whose difference is the Schur complement."""
+        return np.abs(self.M.D) + np.abs(self.M.C.T @ self.Z)
 
 
 def eigenvalues_near_zero(M, k: int, start: np.ndarray | None = None, lu=None, tol: float = 1e-13,
                           tol_others: float = 1e-10, max_iterations: int = 40, subspace: bool = False):
     """The k eigenvalues of a symmetric matrix nearest zero, ascending, with their eigenvectors.
 
-    Inverse subspace iteration on the factorisation (M needs ``lu()`` and ``n``; ``lu``, one
+    Inverse subspace iteration on the factorisation (M needs ``factor()`` and ``n``; ``lu``, one
     already made, is reused), with four guard vectors: each iteration is one solve with k + 4
     right-hand sides, so the cost is O(n b^2). Rayleigh-Ritz is done on K^-1 (H = V^T K^-1 V uses
     the solve just made, no product with K; a compiled kernel), and an iteration stops when the
@@ -260,7 +278,7 @@ def eigenvalues_near_zero(M, k: int, start: np.ndarray | None = None, lu=None, t
     if filled:
         V[:, :filled] = np.asarray(start).reshape(n, -1)[:, :filled]
     if lu is None:
-        lu = M.lu()
+        lu = M.factor()
     if lu.singular:
         raise np.linalg.LinAlgError("matrix is exactly singular")
     V = orthonormal(V)

@@ -3,9 +3,10 @@
 The ball touches edges, not nodes (see :class:`snapmem.model.contact.Ball`): each edge's gap is the
 distance from the ball's centre c = (0, zc) to the segment [a, b], minus the radius. Three cases
 per edge (the centre projects before a, after b, or inside), each a few scalar formulas, which
-numpy can only vectorise with masks and fancy indexing: the profile of ``ball_drop`` showed that
-bookkeeping taking a third of every Newton iteration. These loops do the same arithmetic (the
-numpy version stays in ``Ball.edge_gap`` as the reference the tests compare against).
+numpy can only vectorise with masks and fancy indexing (what that costs: docs/performance.md).
+These loops do the same arithmetic (the numpy version stays in ``Ball.edge_gap`` as the
+reference the tests compare against). Also the linear gaps' barrier (rod, shell, plane), and
+:func:`ipc_barrier`, the one formula of the IPC barrier every contact uses.
 Compiled by numba on first use and cached on disk.
 """
 
@@ -13,6 +14,25 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+
+@njit(cache=True, nogil=True, inline="always")
+def ipc_barrier(d, dhat, c):
+    """c b(d), c b'(d), c b''(d) of the IPC barrier b(d) = -(d - dhat)^2 ln(d / dhat), for
+    0 < d < dhat (zero beyond dhat, infinite at d <= 0: the callers' cases) [c m^2, c m, c].
+
+    The one formula of the barrier: the compiled contact kernels call it per node or edge
+    (c = kappa A / dhat), snapmem.model.contact.barrier its ``.py_func`` on arrays (c = 1).
+    """
+    lg = np.log(d / dhat)
+    s = d - dhat
+    return -c * s * s * lg, c * (-2.0 * s * lg - s * s / d), c * (-2.0 * lg + (dhat - d) * (3.0 * d + dhat) / (d * d))
+
+
+@njit(cache=True, nogil=True)
+def barrier_force(d, dhat, c):
+    """|c b'(d)|: the normal force [N] of a barrier with weight c at gap d (0 beyond dhat)."""
+    return 0.0 if d >= dhat else abs(ipc_barrier(d, dhat, c)[1])
 
 
 @njit(cache=True, nogil=True)
@@ -84,7 +104,7 @@ def _bilinear_hessian(i, j):
 def _segment_gap(ar, az, ur, uz, wr, wz, radius, body, g, h, order, gC, gL):
     """Gap |C| / L - radius of the centre to the line of an edge, C = u x w, L = |u|, with its
     derivatives in (r_a, z_a, r_b, z_b[, zc]) into g, h (u = b - a, w = c - a); gC, gL are work
-    arrays of g's size (no allocation per edge: the profile of ball_drop showed it)."""
+    arrays of g's size (no allocation per edge)."""
     C = ur * wz - uz * wr
     L = np.sqrt(ur * ur + uz * uz)
     sgn = 1.0 if C >= 0 else -1.0
@@ -168,16 +188,12 @@ def ball_edge_barrier(x, edges, zc, radius, dhat, coef, body, order):
             d = _segment_gap(ar, az, ur, uz, wr, wz, radius, body, g, h, order, gC, gL)
         if d <= 0.0:
             return np.inf, which, grad, hess
-        lg = np.log(d / dhat)
-        s = d - dhat
-        c = coef[e]
-        energy += -c * s * s * lg
+        b0, b1, b2 = ipc_barrier(d, dhat, coef[e])
+        energy += b0
         if order >= 1:
-            b1 = c * (-2.0 * s * lg - s * s / d)
             for a in range(n):
                 grad[k, a] = b1 * g[a]
             if order >= 2:
-                b2 = c * (-2.0 * lg + (dhat - d) * (3.0 * d + dhat) / (d * d))
                 for a in range(n):
                     for bb in range(n):
                         hess[a, bb, k] = b2 * g[a] * g[bb] + b1 * h[a, bb]
@@ -228,14 +244,12 @@ def linear_barrier(x, nodes, axis, sign, offset, coef, dhat, order):
             energy = np.inf
             m += 1
             continue
-        lg = np.log(d / dhat)
-        s = d - dhat
-        c = coef[i]
-        energy += -c * s * s * lg
+        b0, b1, b2 = ipc_barrier(d, dhat, coef[i])
+        energy += b0
         if order >= 1:
-            grad[m, axis] = sign * c * (-2.0 * s * lg - s * s / d)
+            grad[m, axis] = sign * b1
         if order >= 2:
-            hess[m, axis, axis] = c * (-2.0 * lg + (dhat - d) * (3.0 * d + dhat) / (d * d))
+            hess[m, axis, axis] = b2
         m += 1
     return energy, near, grad, hess
 

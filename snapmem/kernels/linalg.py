@@ -4,8 +4,12 @@ The first is the LDL^T factorisation without pivoting of a symmetric band matrix
 signs give the inertia (Sylvester's law of inertia) and whose factors solve with K wherever
 they are stable (snapmem.kernels.banded checks their growth and falls back to LAPACK's pivoted band LU).
 LAPACK has no symmetric indefinite band factorisation, and its band eigen-solvers reduce to
-tridiagonal form in O(n^2 b) work, which the profile of a traced branch showed dominating from
-N ~ 100 nodes; this kernel is O(n b^2). Compiled by numba on first use and cached on disk.
+tridiagonal form in O(n^2 b) work; this kernel is O(n b^2) (measurements: docs/performance.md).
+Compiled by numba on first use and cached on disk.
+
+Also here: the refinement policies of the bordered solves (``REFINE_*``, :func:`needs_refinement`),
+which :class:`snapmem.kernels.banded.BorderedLU` and :func:`snapmem.kernels.bordered.bordered_solve`
+both take.
 """
 
 from __future__ import annotations
@@ -99,7 +103,7 @@ def band_ldlt_solve(F: np.ndarray, x: np.ndarray):
 
 @njit(cache=True, nogil=True)
 def _ldlt_solve_vector(F, x):
-    """:func:`band_ldlt_solve` for one right-hand side (a third faster than the loop over columns)."""
+    """:func:`band_ldlt_solve` for one right-hand side (its own loop: faster than the loop over columns)."""
     n, b = F.shape[0], F.shape[1] - 1
     for j in range(n):
         xj = x[j]
@@ -115,7 +119,7 @@ def _ldlt_solve_vector(F, x):
 @njit(cache=True, nogil=True)
 def orthonormal(X: np.ndarray) -> np.ndarray:
     """Q of the QR factorisation of X (n, m), each column oriented along X's (diag(R) > 0): Gram-Schmidt
-    with one re-orthogonalisation (loops, not numba's LAPACK bindings, which take seconds to compile)."""
+    with one re-orthogonalisation (loops, not numba's LAPACK bindings, which are slow to compile)."""
     n, m = X.shape
     Q = X.copy()
     r = np.empty(m)
@@ -232,3 +236,26 @@ def band_matvec(lower: np.ndarray, x: np.ndarray):
                 y[j + m, c] += k * x[j, c]
                 y[j, c] += k * x[j + m, c]
     return y
+
+
+#: Refinement policies of a bordered solve [[A, B], [C^T, D]] x = rhs by block elimination:
+#: never refine; refine (one step) where the Schur complement S = D - C^T A^-1 B shows
+#: cancellation (a diagonal entry below ``CANCELLATION`` of its terms: A near singular, as at a
+#: fold); always refine (continuation's extended systems).
+REFINE_NEVER, REFINE_ON_CANCELLATION, REFINE_ALWAYS = 0, 1, 2
+#: |S_aa| below this fraction of |D_aa| + |(C^T A^-1 B)_aa| is cancellation.
+CANCELLATION = 1e-6
+
+
+@njit(cache=True, nogil=True)
+def needs_refinement(policy, S, terms):
+    """Whether a bordered solve with Schur complement S (k, k) takes a refinement step under
+    ``policy`` (a ``REFINE_*``); ``terms`` (k, k) is |D| + |C^T A^-1 B| entrywise."""
+    if policy == REFINE_ALWAYS:
+        return True
+    if policy == REFINE_NEVER:
+        return False
+    for a in range(S.shape[0]):
+        if abs(S[a, a]) < CANCELLATION * terms[a, a]:
+            return True
+    return False

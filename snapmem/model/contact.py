@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step, linear_barrier,
-                              linear_max_step, linear_min_gap)
+from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step, ipc_barrier,
+                                    linear_barrier, linear_max_step, linear_min_gap)
 from snapmem.errors import check_real
-from snapmem.model.terms import NodeLocal, NodeTerm, RigidBody
+from snapmem.model.terms import BallDeclaration, LinearContactDeclaration, NodeLocal, NodeTerm, RigidBody
 
 FRACTION_TO_BOUNDARY = 0.9
 
@@ -35,22 +35,17 @@ def barrier(d: np.ndarray, dhat: float, order: int = 2):
     """IPC barrier b(d) and its first two derivatives in d (zero where d >= dhat; +inf for d <= 0).
 
     Returns (b, b', b'') with entries None above ``order``; each of the shape of ``d`` [m^2, m, 1].
+    The formula is :func:`snapmem.kernels.contact.ipc_barrier`'s (the compiled kernels' own).
     """
     d = np.asarray(d, dtype=float)
     if d.size and 0.0 < d.min() and d.max() < dhat:     # all active and admissible: the formulas alone
-        log = np.log(d / dhat)
-        e = d - dhat
-        return (-e * e * log, (-2.0 * e * log - e * e / d) if order >= 1 else None,
-                (-2.0 * log + (dhat - d) * (3.0 * d + dhat) / (d * d)) if order >= 2 else None)
-    active = d < dhat
-    dd = np.where(active, d, dhat)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        log = np.log(dd / dhat)
-        e = dd - dhat
-        b = np.where(d > 0, -e * e * log, np.inf)
-        b1 = (-2.0 * e * log - e * e / dd) if order >= 1 else None
-        b2 = (-2.0 * log + (dhat - dd) * (3.0 * dd + dhat) / (dd * dd)) if order >= 2 else None
-    return b, b1, b2
+        b, b1, b2 = ipc_barrier.py_func(d, dhat, 1.0)
+    else:
+        dd = np.where(d < dhat, d, dhat)                 # inactive: b = b' = b'' = 0 at d = dhat
+        with np.errstate(divide="ignore", invalid="ignore"):
+            b, b1, b2 = ipc_barrier.py_func(dd, dhat, 1.0)
+        b = np.where(d > 0, b, np.inf)
+    return b, (b1 if order >= 1 else None), (b2 if order >= 2 else None)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -174,6 +169,14 @@ class Contact(NodeTerm):
         """d(gap)/d(alpha) along the step for a gap linear in the coordinates."""
         _, g, _ = self.gap(x, y, 1)
         return g[:, 0] * dx[:, 0] + g[:, 1] * dx[:, 1] + (g[:, 2:] @ dy if g.shape[1] > 2 else 0.0)
+
+    def compiled(self, scene, bodies=slice(0, 0)):
+        """A linear gap without bodies (rod, shell, plane) declares its nodes, gap and weights."""
+        if self.linear is None or self.bodies:
+            return None
+        axis, sign, offset = self.linear
+        return LinearContactDeclaration(np.asarray(self._node_index(scene.meridian.nodes), dtype=np.int64), int(axis),
+                                        float(sign), float(offset), float(self.dhat), self._coef(scene.node_area))
 
     def forces(self, x: np.ndarray, y: np.ndarray, area: np.ndarray) -> np.ndarray:
         """Normal force of the body on each node's ring, |kappa A_i b'(d_i) / d_hat|, shape (M,) [N]."""
@@ -399,6 +402,14 @@ class Ball(Contact):
             return super().forces(x, y, area)
         d = self.gaps(x, y)
         return np.abs(self._edge_coef * barrier(d, self.dhat, 1)[1])
+
+    def compiled(self, scene, bodies=slice(0, 0)):
+        """A ball touching edges (``meridian`` given, no ``nodes``), held or with its one body."""
+        if self.meridian is None or self.nodes is not None or len(self.bodies) > 1:
+            return None
+        return BallDeclaration(float(self.radius), float(self.dhat), np.asarray(self._edge_coef, dtype=float),
+                               float(self.z0), bodies.start if self.bodies else -1,
+                               -self.mass * self.gravity if self.bodies else 0.0)
 
     def body_energy(self, y):
         return -self.mass * self.gravity * float(y[0]) if self.bodies else 0.0

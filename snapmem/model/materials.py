@@ -30,18 +30,16 @@ import numpy as np
 
 from snapmem.errors import SnapmemError
 from snapmem.kernels.assembly import invariant_chain, linear_law_density
+from snapmem.kernels.laws import first_invariant, gent_invariants
+from snapmem.kernels.switch import compiled
 from snapmem.model.parameters import Parameter
 
 
-#: Use the compiled chain rule (snapmem.kernels.invariant_chain) for 1D float arrays; False
-#: keeps the numpy expressions below (the reference the tests compare with).
-compiled_chain = True
-
-
 def _compilable(lam1, lam2) -> bool:
-    """Whether the compiled kernels apply: two 1D float64 arrays of one shape (else numpy, which
-    takes scalars and any shape)."""
-    return (isinstance(lam1, np.ndarray) and isinstance(lam2, np.ndarray) and lam1.ndim == 1
+    """Whether the compiled chain rule (snapmem.kernels.assembly.invariant_chain) applies: two 1D
+    float64 arrays of one shape, off the reference path (else numpy, which takes scalars and any
+    shape: the reference the tests compare with)."""
+    return (compiled() and isinstance(lam1, np.ndarray) and isinstance(lam2, np.ndarray) and lam1.ndim == 1
             and lam1.dtype == np.float64 and lam2.dtype == np.float64 and lam1.shape == lam2.shape)
 
 
@@ -156,7 +154,7 @@ class InvariantLaw(Law):
         raise NotImplementedError
 
     def density(self, lam1, lam2) -> Density:
-        if compiled_chain and self.linear and _compilable(lam1, lam2):
+        if self.linear and _compilable(lam1, lam2):
             _, W1, W2, _, _, _ = self.invariant_derivatives(3.0, 3.0)
             return Density(*linear_law_density(lam1, lam2, float(W1), float(W2)))
         a2, b2 = lam1 * lam1, lam2 * lam2
@@ -164,7 +162,7 @@ class InvariantLaw(Law):
         I1 = a2 + b2 + inv
         I2 = 1.0 / a2 + 1.0 / b2 + a2 * b2
         W, W1, W2, W11, W12, W22 = self.invariant_derivatives(I1, I2)
-        if compiled_chain and _compilable(lam1, lam2):
+        if _compilable(lam1, lam2):
             w1, w2, w11, w12, w22 = invariant_chain(lam1, lam2, *(_full(x, lam1) for x in (W1, W2, W11, W12, W22)))
             return Density(W, w1, w2, w11, w12, w22)
         # first and second derivatives of the invariants in (lam1, lam2)
@@ -266,15 +264,13 @@ class Gent(InvariantLaw):
         return cls(mu=1.0, Jlim=20.0)        # a lock within reach of the tests' stretches
 
     def invariant_derivatives(self, I1, I2):
-        s = 1.0 - (I1 - 3.0) / self.Jlim           # > 0 inside the domain
+        W, W1, W11 = gent_invariants.py_func(I1, self.mu, self.Jlim)     # the compiled kernels' formula
         zero = np.zeros_like(I1)
-        W1 = 0.5 * self.mu / s
-        return -0.5 * self.mu * self.Jlim * np.log(s), W1, zero, W1 / (s * self.Jlim), zero, zero
+        return W, W1, zero, W11, zero, zero
 
     def admissible(self, lam1, lam2):
-        a2, b2 = lam1 * lam1, lam2 * lam2
         with np.errstate(divide="ignore", invalid="ignore"):
-            I1 = a2 + b2 + 1.0 / (a2 * b2)
+            I1 = first_invariant.py_func(lam1, lam2)
         return (lam1 > 0) & (lam2 > 0) & (I1 - 3.0 < self.Jlim)
 
 

@@ -4,10 +4,8 @@ The total potential is Pi(q) = sum of the terms' energies. ``Scene.evaluate`` re
 gradient and its Hessian (the tangent stiffness K) in band storage on the free degrees of
 freedom. This one assembly is what Newton, continuation and time stepping all call.
 
-Free degrees of freedom are numbered so that K is banded: in node order for an open meridian
-(half-bandwidth 3), and for a closed meridian in the interleaved order 0, N-1, 1, N-2, ... that
-puts every edge's two nodes at most two places apart (half-bandwidth 5), so the edge N-1 -> 0
-needs no corner block and the solve stays a plain O(N) band LU.
+Free degrees of freedom are numbered so that K is banded: ``Scene.dofs``, a
+:class:`~snapmem.model.dofs.DofMap`, says how.
 """
 
 from __future__ import annotations
@@ -21,11 +19,15 @@ import numpy as np
 from snapmem.kernels.banded import BandedMatrix
 from snapmem.kernels.bordered import BodyMatrix
 from snapmem.errors import SnapmemError, check_real
-from snapmem.kernels.assembly import edge_assembly, radius_max_step, scatter_add, state_check, volume_gradient
-from snapmem.model.kinematics import EdgeKinematics
+from snapmem.kernels.assembly import (edge_assembly, radius_max_step, residual_floor, scatter_add, state_check,
+                                     volume_gradient)
+from snapmem.kernels.switch import compiled
+from snapmem.model.dofs import DofMap, node_areas
+from snapmem.model.kinematics import EdgeKinematics, density_chain_rule
 from snapmem.model.materials import Density
 from snapmem.model.meridian import Meridian
-from snapmem.model.terms import DensityTerm, EdgeTerm, Electric, NodeTerm, PressureWork, Stretching, Term
+from snapmem.model.terms import (DensityTerm, EdgeTerm, Electric, NodeTerm, PressureDeclaration, PressureWork,
+                                 Stretching, Term)
 
 
 @dataclass
@@ -100,9 +102,6 @@ class Scene:
         # rigid bodies of the node terms: one degree of freedom each, after the 2N node coordinates
         self.bodies = tuple(b for t in self.node_terms for b in t.bodies)
         self.n_node_dofs = 2 * meridian.nodes
-        offsets = np.cumsum([0] + [len(t.bodies) for t in self.node_terms])
-        self._body_slices = [slice(self.n_node_dofs + a, self.n_node_dofs + b)
-                             for a, b in zip(offsets[:-1], offsets[1:])]
         n_dof = self.n_node_dofs + len(self.bodies)
         self.fixed = tuple(sorted({int(d) for d in fixed}))
         if any(d < 0 or d >= n_dof for d in self.fixed):
@@ -116,56 +115,15 @@ class Scene:
         for key, value in (loads or {}).items():
             self.loads[key] = check_real(key, value)
         self.weight = 2.0 * np.pi * meridian.mid_radius * meridian.length * self.thickness  # dV_bar (E,)
-        self._build_dof_map()
-        fixed_r = {d for d in self.fixed if d % 2 == 0 and d < 2 * meridian.nodes}
-        self._free_radius_dofs = np.array([d for d in range(0, 2 * meridian.nodes, 2) if d not in fixed_r], dtype=int)
+        #: the degree-of-freedom map (free dofs, band numbering, scatter maps, bodies)
+        self.dofs = DofMap.build(meridian, self.fixed, [len(t.bodies) for t in self.node_terms])
+        self.free, self.n_band, self.bandwidth = self.dofs.free, self.dofs.n_band, self.dofs.bandwidth
+        self.edge_dofs = self.dofs.edge_dofs
+        self.node_area = node_areas(meridian)
         self._domain_terms = [t for t in self.density_terms if t.restricts_domain]
-
-    # ----------------------------------------------------------------------------------------
-    # numbering of the free degrees of freedom and the scatter of local blocks into the band
-    def _build_dof_map(self):
-        m = self.meridian
-        n_nodes = m.nodes
-        if m.closed:
-            half = (n_nodes + 1) // 2
-            order = np.empty(n_nodes, dtype=int)
-            order[0::2] = np.arange(half)
-            order[1::2] = np.arange(n_nodes - 1, half - 1, -1)
-        else:
-            order = np.arange(n_nodes)
-        dof_order = (2 * order[:, None] + np.arange(2)).ravel()
-        is_fixed = np.zeros(2 * n_nodes, dtype=bool)
-        is_fixed[list(self.fixed)] = True
-        self.free = dof_order[~is_fixed[dof_order]]          # band position -> dof
-        self.n_band = self.free.size
-        self.free = np.concatenate([self.free, 2 * n_nodes + np.arange(len(self.bodies))])  # bodies last
-        position = np.full(2 * n_nodes, -1)
-        position[self.free[:self.n_band]] = np.arange(self.n_band)
-        self._position = position
-        edges = m.edges
-        self.edge_dofs = np.concatenate([2 * edges[:, :1] + np.arange(2), 2 * edges[:, 1:] + np.arange(2)], axis=1)
-        lpos = position[self.edge_dofs]                          # (E, 4)
-        self._edge_pos = lpos
-        i, j = lpos[:, :, None], lpos[:, None, :]                # (E, 4, 1), (E, 1, 4)
-        valid = (i >= 0) & (j >= 0)
-        self.bandwidth = b = max(1, int(np.max(np.where(valid, np.abs(i - j), 0))))
-        rows = b + 1
-        self._band_size = rows * self.n_band
-        # the lower band, lower[i - j, j] = K[i, j] (i >= j), flattened as lower.T in C order; the
-        # upper triangle's entries (i < j, the symmetric twins) and fixed dofs go to a trash slot
-        flat = np.where(valid & (i >= j), j * rows + (i - j), self._band_size)
-        self._hess_index = flat.transpose(1, 2, 0).ravel()                 # entry-major, like the local Hessians
-        # node terms: each node's 2x2 block (r_i, z_i) into the same band
-        npos = position[2 * np.arange(n_nodes)[:, None] + np.arange(2)]          # (N, 2)
-        i, j = npos[:, :, None], npos[:, None, :]
-        valid = (i >= 0) & (j >= 0)
-        self._node_hess_full = np.where(valid & (i >= j), j * rows + (i - j), self._band_size)   # (N, 2, 2)
-        self._node_pos = npos
-        lv = m.node_lengths()
-        area = 2.0 * np.pi * m.r * lv
-        pole = m.r == 0
-        area[pole] = np.pi * lv[pole] ** 2                     # a pole node's cap
-        self.node_area = area
+        # the compiled membrane assembly takes the density terms and at most the pressure work
+        self._compilable = len(self.edge_terms) <= 1 and all(
+            isinstance(t.compiled(self), PressureDeclaration) for t in self.edge_terms)
 
     @property
     def n_free(self) -> int:
@@ -187,7 +145,7 @@ class Scene:
 
     def body_coordinates(self, q: np.ndarray) -> list:
         """The heights of each node term's bodies, one array (k_t,) per node term."""
-        return [q[s] for s in self._body_slices]
+        return [q[s] for s in self.dofs.body_slices]
 
     def resolve_loads(self, loads: Mapping[str, float] | None) -> dict:
         """The scene's default loads updated by ``loads``; unknown names are an error."""
@@ -236,12 +194,12 @@ class Scene:
         loads = self.resolve_loads(loads)
         kin = self.kinematics(q)
         dens = self.density(kin, loads)
-        if order >= 1 and dens is not None and self.compiled and self._compilable:
+        if order >= 1 and dens is not None and self._compilable and compiled():
             energy, gradient, band, floor = self._membrane_compiled(q, kin, dens, loads, order)
         else:
             energy, gradient, band, floor = self._membrane(q, kin, dens, loads, order)
         x = self.node_coordinates(q)
-        for term, s in zip(self.node_terms, self._body_slices):
+        for term, s in zip(self.node_terms, self.dofs.body_slices):
             local = term.node_local(x, q[s], self.node_area, loads, order)
             energy += local.energy
             if order >= 1:
@@ -252,20 +210,11 @@ class Scene:
             return Evaluation(energy, None, None, None)
         stiffness = None
         if order >= 2:
-            stiffness = BandedMatrix.from_lower(band[: self._band_size].reshape(self.n_band, self.bandwidth + 1).T,
+            stiffness = BandedMatrix.from_lower(band[: self.dofs.band_size].reshape(self.n_band, self.bandwidth + 1).T,
                                                 self.bandwidth)
             if self.bodies:
                 stiffness = BodyMatrix(stiffness, band.border.T, band.corner)
         return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
-
-    #: Use the compiled assembly (snapmem.kernels.edge_assembly) for the membrane where it
-    #: applies: density terms plus at most the pressure work (node terms and bodies are added
-    #: after it either way). Set False to use the numpy reference path (the tests compare the two).
-    compiled = True
-
-    @property
-    def _compilable(self) -> bool:
-        return len(self.edge_terms) <= 1 and all(type(t) is PressureWork for t in self.edge_terms)
 
     def _membrane(self, q, kin, dens, loads, order):
         """Energy, gradient (n_dof,), flat band (with a trash slot; None below order 2) and the
@@ -275,7 +224,7 @@ class Scene:
         if dens is not None:
             energy += float(self.weight @ dens.w)
             if order >= 1:
-                grad_local, hess_local = _chain_rule(kin, dens, self.weight, order)
+                grad_local, hess_local = density_chain_rule(kin, dens, self.weight, order)
         for term in self.edge_terms:
             e, g, h = term.edge_local(kin, loads, order)
             energy += e
@@ -290,22 +239,21 @@ class Scene:
         gradient = np.bincount(self.edge_dofs.ravel(), grad_local.ravel(), minlength=q.size)
         band = None
         if order >= 2:
-            band = _Band(np.bincount(self._hess_index, hess_local.reshape(-1), minlength=self._band_size + 1))
-        floor = 64.0 * np.finfo(float).eps * self.meridian.nodes * float(np.max(np.abs(grad_local)))
-        return energy, gradient, band, floor
+            band = _Band(np.bincount(self.dofs.hess_index, hess_local.reshape(-1), minlength=self.dofs.band_size + 1))
+        return energy, gradient, band, residual_floor(self.meridian.nodes, float(np.max(np.abs(grad_local))))
 
     def _membrane_compiled(self, q, kin, dens, loads, order):
-        """As :meth:`_membrane`, by the compiled kernel (snapmem.kernels.edge_assembly)."""
+        """As :meth:`_membrane`, by the compiled kernel (snapmem.kernels.assembly.edge_assembly)."""
         pressure = loads["pressure"] if self.edge_terms else 0.0
         m = self.meridian
         gradient, band, volume, force = edge_assembly(
             q, m.edges, kin.inv_length, kin.inv_mid_radius, self.weight, dens.w1, dens.w2, dens.w11, dens.w12,
-            dens.w22, pressure, self._hess_index, self._band_size, order)
+            dens.w22, pressure, self.dofs.hess_index, self.dofs.band_size, order)
         energy = float(self.weight @ dens.w) - pressure * volume
-        return energy, gradient, (_Band(band) if order >= 2 else None), 64.0 * np.finfo(float).eps * m.nodes * force
+        return energy, gradient, (_Band(band) if order >= 2 else None), residual_floor(m.nodes, force)
 
     def _empty_band(self, order):
-        return _Band(np.zeros(self._band_size + 1)) if order >= 2 else None
+        return _Band(np.zeros(self.dofs.band_size + 1)) if order >= 2 else None
 
     def _add_node_term(self, local, s, gradient, band, order) -> None:
         """Add a node term's gradient and Hessian (node blocks, edge blocks, body parts) in place."""
@@ -323,10 +271,10 @@ class Scene:
         if order < 2:
             return
         if local.hessian is not None:
-            scatter_add(band.values, self._node_hess_full[nodes].ravel(), local.hessian[:, :2, :2].ravel())
+            scatter_add(band.values, self.dofs.node_hess[nodes].ravel(), local.hessian[:, :2, :2].ravel())
         if local.edge_hessian is not None:
             he = local.edge_hessian[:4, :4]
-            scatter_add(band.values, self._hess_index.reshape(16, -1)[:, edges].ravel(), he.reshape(16, -1).ravel())
+            scatter_add(band.values, self.dofs.hess_index.reshape(16, -1)[:, edges].ravel(), he.reshape(16, -1).ravel())
 
     def _add_border(self, local, s, band) -> None:
         """Add a node term's node-body and body-body blocks to the border and corner of ``band``."""
@@ -340,7 +288,7 @@ class Scene:
         block = (slice(cols.start, cols.stop),) * 2
         if local.hessian is not None:
             nodes = slice(None) if local.nodes is None else local.nodes
-            pos = self._node_pos[nodes].ravel()
+            pos = self.dofs.node_pos[nodes].ravel()
             h = local.hessian
             for a, col in enumerate(cols):
                 scatter_add(border[col], pos, h[:, :2, 2 + a].ravel())
@@ -350,7 +298,7 @@ class Scene:
         if local.edge_hessian is not None:
             edges = slice(None) if local.edges is None else local.edges
             he = local.edge_hessian                                # (4 + k, 4 + k, M)
-            epos = self._edge_pos[edges].T.ravel()                 # entry-major (4, M)
+            epos = self.dofs.edge_pos[edges].T.ravel()             # entry-major (4, M)
             for a, col in enumerate(cols):
                 scatter_add(border[col], epos, he[:4, 4 + a].ravel())
             corner[block] += he[4:, 4:].sum(axis=-1)
@@ -372,12 +320,12 @@ class Scene:
         for term in self.density_terms + self.edge_terms:
             if name not in term.loads:
                 continue
-            if type(term) is PressureWork:                     # -dV/dq, compiled
+            if type(term) is PressureWork and compiled():      # -dV/dq, compiled
                 out -= volume_gradient(q, self.meridian.edges, q.size)
                 continue
             kin = self.kinematics(q) if kin is None else kin
             if isinstance(term, DensityTerm):
-                local = _chain_rule(kin, term.load_density(kin, loads, name), self.weight, 1)[0]
+                local = density_chain_rule(kin, term.load_density(kin, loads, name), self.weight, 1)[0]
             else:
                 local = term.load_gradient(kin, loads, name)
             out += np.bincount(self.edge_dofs.ravel(), local.ravel(), minlength=q.size)
@@ -387,7 +335,7 @@ class Scene:
     # the domain every state must stay in
     def inadmissible(self, q: np.ndarray) -> str | None:
         """Why q is outside the model's domain (negative radius, zero length, material lock), or None."""
-        bad = state_check(q, self._free_radius_dofs)
+        bad = state_check(q, self.dofs.radius_dofs)
         if bad == -2:
             return "state has NaN or inf"
         if bad >= 0:
@@ -400,7 +348,7 @@ class Scene:
             if not np.all(ok):
                 return f"edge {int(np.flatnonzero(~ok)[0])} is outside the domain of {term!r}"
         x = self.node_coordinates(q)
-        for term, s in zip(self.node_terms, self._body_slices):
+        for term, s in zip(self.node_terms, self.dofs.body_slices):
             why = term.admissible(x, q[s])
             if why is not None:
                 return why
@@ -413,7 +361,7 @@ class Scene:
         if not self.node_terms:
             return alpha
         x, dx = self.node_coordinates(q), self.node_coordinates(dq)
-        for term, s in zip(self.node_terms, self._body_slices):
+        for term, s in zip(self.node_terms, self.dofs.body_slices):
             alpha = min(alpha, term.max_step(x, q[s], dx, dq[s]))
         return alpha
 
@@ -501,45 +449,3 @@ def _accumulate(total: np.ndarray, part: np.ndarray) -> np.ndarray:
     """total + part, in place (no new E-sized temporary)."""
     total += part
     return total
-
-
-def _chain_rule(kin: EdgeKinematics, dens: Density, weight: np.ndarray, order: int):
-    """Edge gradient (E, 4) and entry-major Hessian (4, 4, E) of sum_e weight_e W(lam1_e, lam2_e).
-
-    The one place where material derivatives meet strain derivatives:
-    g = wt (W1 g1 + W2 g2), H = wt (W11 g1 g1 + W12 (g1 g2 + g2 g1) + W22 g2 g2 + W1 d2lam1),
-    with g1 = dlam1/dx = (-u, -v, u, v), u, v = t / l_bar, g2 = dlam2/dx = (h, 0, h, 0),
-    h = 1 / (2 r_m_bar), and d2lam1 = [[A, -A], [-A, A]]. The structure is written out: ten
-    distinct entries of the symmetric 4x4 block, each a few products of (E,) arrays, instead of
-    outer products of (E, 4) arrays (which the profile showed to dominate the iteration).
-    """
-    inv_l = 1.0 / kin.l
-    u = kin.dr * inv_l * kin.inv_length
-    v = kin.dz * inv_l * kin.inv_length
-    h = 0.5 * kin.inv_mid_radius
-    a1, a2 = weight * dens.w1, weight * dens.w2
-    grad = np.empty((u.size, 4))
-    grad[:, 0] = a2 * h - a1 * u
-    grad[:, 1] = -a1 * v
-    grad[:, 2] = a2 * h + a1 * u
-    grad[:, 3] = a1 * v
-    if order < 2:
-        return grad, None
-    a = weight * dens.w11
-    b = (weight * dens.w12) * h
-    c = (weight * dens.w22) * h * h
-    d = a1 * inv_l * inv_l * kin.inv_length * inv_l          # w1 / (l^3 l_bar) times (I - t t^T) l^2
-    A_rr, A_rz, A_zz = d * kin.dz * kin.dz, -d * kin.dr * kin.dz, d * kin.dr * kin.dr
-    uu, uv, vv = a * u * u, a * u * v, a * v * v
-    bu, bv = b * u, b * v
-    hess = np.empty((4, 4, u.size))
-    hess[0, 0] = uu - 2.0 * bu + c + A_rr
-    hess[2, 2] = uu + 2.0 * bu + c + A_rr
-    hess[0, 2] = hess[2, 0] = c - uu - A_rr
-    hess[1, 1] = hess[3, 3] = vv + A_zz
-    hess[1, 3] = hess[3, 1] = -vv - A_zz
-    hess[0, 1] = hess[1, 0] = uv - bv + A_rz
-    hess[2, 3] = hess[3, 2] = uv + bv + A_rz
-    hess[0, 3] = hess[3, 0] = bv - uv - A_rz
-    hess[1, 2] = hess[2, 1] = -uv - bv - A_rz
-    return grad, hess

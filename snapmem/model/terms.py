@@ -9,23 +9,81 @@ Two kinds, distinguished by what they give the scene's assembly:
 
 A term that depends on a load parameter (``pressure``, ``voltage``) names it in ``loads`` and
 gives the derivative of its gradient with respect to that load, for continuation.
+
+A term the compiled time step (snapmem.dynamics.compiled_step) can evaluate says so by its
+``compiled`` method, which returns a *declaration* (one of the named tuples below: the numbers
+the kernel needs) or None; a scene runs the compiled step when every one of its terms declares.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from snapmem.errors import check_real
+from snapmem.kernels.assembly import swept_volume
+from snapmem.kernels.laws import LAW_GENT, LAW_LINEAR, electric_density
 from snapmem.model.kinematics import EdgeKinematics
-from snapmem.model.materials import Density, Law
+from snapmem.model.materials import Density, Gent, InvariantLaw, Law
+
+
+# ----------------------------------------------------------------------------------------------
+# declarations: what the compiled time step needs of a term
+class LawDeclaration(NamedTuple):
+    """A stretching law the kernel evaluates: its kind (snapmem.kernels.laws.LAW_*) and parameters."""
+
+    kind: int
+    params: tuple
+
+
+class ElectricDeclaration(NamedTuple):
+    """The electric term: its density is -coefficient voltage^2 lam1^2 lam2^2, coefficient = eps / (2 H^2)."""
+
+    coefficient: float
+
+
+class PressureDeclaration(NamedTuple):
+    """The pressure work -p V (the swept volume, fused into the membrane assembly)."""
+
+
+class LinearContactDeclaration(NamedTuple):
+    """A barrier on a gap linear in one coordinate, d_i = sign x[i, axis] + offset (rod, shell, plane).
+
+    nodes : (M,) the nodes that can touch; coef : (N,) kappa A_i / dhat of every node [Pa m]."""
+
+    nodes: np.ndarray
+    axis: int
+    sign: float
+    offset: float
+    dhat: float
+    coef: np.ndarray
+
+
+class BallDeclaration(NamedTuple):
+    """A ball on the axis touching edges: radius, barrier width, coef (E,) kappa A_e / dhat of every
+    edge, start height z0, and its body: the index in q of its height (-1 if held) and its weight
+    -m g [N] (0 if held)."""
+
+    radius: float
+    dhat: float
+    coef: np.ndarray
+    z0: float
+    dof: int
+    weight: float
 
 
 class Term:
     """Base class: ``loads`` are the names of the load parameters the term depends on."""
 
     loads: tuple[str, ...] = ()
+
+    def compiled(self, scene):
+        """What the compiled time step needs of this term in ``scene`` (a declaration above), or
+        None if it has no compiled form (then the scene runs the general path). A subclass that
+        changes the energy must override this too."""
+        return None
 
 
 class DensityTerm(Term):
@@ -81,6 +139,21 @@ class Stretching(DensityTerm):
         """Whether the law's domain is smaller than positive stretches (Gent's lock)."""
         return type(self.law).admissible is not Law.admissible
 
+    def compiled(self, scene):
+        """The law's kind: any law linear in the invariants (its constant dW/dI1, dW/dI2), or one
+        of :data:`COMPILED_LAWS`; None for another law (Yeoh)."""
+        law = self.law
+        if isinstance(law, InvariantLaw) and law.linear:
+            return LawDeclaration(LAW_LINEAR, tuple(float(x) for x in law.invariant_derivatives(3.0, 3.0)[1:3]))
+        declare = COMPILED_LAWS.get(type(law))
+        return None if declare is None else declare(law)
+
+
+#: Laws the compiled kernels evaluate beyond the linear ones: law class -> its declaration.
+COMPILED_LAWS = {
+    Gent: lambda law: LawDeclaration(LAW_GENT, (float(law.mu), float(law.Jlim))),
+}
+
 
 @dataclass(frozen=True)
 class Electric(DensityTerm):
@@ -106,10 +179,8 @@ class Electric(DensityTerm):
         check_real("H", self.thickness, minimum=0.0, min_inclusive=False)
 
     def _density(self, kin, a: float) -> Density:
-        """Density of -a lam1^2 lam2^2 and its derivatives."""
-        l1, l2 = kin.lam1, kin.lam2
-        return Density(w=-a * (l1 * l2) ** 2, w1=-2.0 * a * l1 * l2 * l2, w2=-2.0 * a * l1 * l1 * l2,
-                       w11=-2.0 * a * l2 * l2, w12=-4.0 * a * l1 * l2, w22=-2.0 * a * l1 * l1)
+        """Density of -a lam1^2 lam2^2 and its derivatives (snapmem.kernels.laws.electric_density)."""
+        return Density(*electric_density.py_func(kin.lam1, kin.lam2, a))
 
     def density(self, kin, loads):
         phi = loads["voltage"]
@@ -118,6 +189,9 @@ class Electric(DensityTerm):
     def load_density(self, kin, loads, name):
         assert name == "voltage"
         return self._density(kin, self.permittivity * loads["voltage"] / self.thickness ** 2)
+
+    def compiled(self, scene):
+        return ElectricDeclaration(0.5 * self.permittivity / self.thickness ** 2)
 
 
 class PressureWork(EdgeTerm):
@@ -135,16 +209,12 @@ class PressureWork(EdgeTerm):
         """Per-edge volume, its gradient (E, 4) and entry-major Hessian (4, 4, E) (None below ``order``).
 
         ``scale`` multiplies the gradient and Hessian (not the volume), so -p dV needs no copy.
+        The formula is snapmem.kernels.assembly.swept_volume's.
         """
-        c = np.pi / 3.0
-        ra, rb, dz = kin.ra, kin.rb, kin.dz
-        s = ra * ra + ra * rb + rb * rb
-        v = c * s * dz
+        dz = kin.dz
+        v, c, s, ga, gb = swept_volume.py_func(kin.ra, kin.rb, dz, scale)
         if order < 1:
             return v, None, None
-        c *= scale
-        s = c * s
-        ga, gb = c * (2.0 * ra + rb), c * (ra + 2.0 * rb)
         grad = np.stack([ga * dz, -s, gb * dz, s], axis=1)
         if order < 2:
             return v, grad, None
@@ -165,6 +235,9 @@ class PressureWork(EdgeTerm):
     def load_gradient(self, kin, loads, name):
         assert name == "pressure"
         return -self.volume_local(kin, 1)[1]
+
+    def compiled(self, scene):
+        return PressureDeclaration()
 
 
 @dataclass(frozen=True)
@@ -244,6 +317,10 @@ class NodeTerm(Term):
     def max_step(self, x, y, dx, dy) -> float:
         """Largest fraction alpha <= 1 of the step (dx, dy) that keeps the state admissible."""
         return 1.0
+
+    def compiled(self, scene, bodies: slice = slice(0, 0)):
+        """As :meth:`Term.compiled`; ``bodies`` is where this term's body coordinates are in q."""
+        return None
 
 
 #: Every energy term with a factory of one example instance for a membrane of thickness H,

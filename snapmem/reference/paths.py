@@ -203,7 +203,7 @@ def coordinate_path(scene: Scene, dof: int, values, start: tuple, load: str = "p
 
     def first(value):
         """Euler prediction from the start: along dq/dload = -K^-1 dR/dload to q[dof] = value."""
-        lu = scene.evaluate(q, loads, order=2).stiffness.lu()
+        lu = scene.evaluate(q, loads, order=2).stiffness.factor()
         if lu.singular:
             return None
         rate = -lu.solve(scene.load_derivative(q, load, loads))
@@ -233,7 +233,7 @@ class _Bordered:
     def __init__(self, scene, z, loads, load, K, unit):
         self.scene, self.z, self.loads, self.load, self.K, self.unit = scene, z, loads, load, K, unit
 
-    def lu(self):
+    def factor(self):
         return _BorderedLU(self)
 
 
@@ -243,7 +243,7 @@ class _BorderedLU:
         b = M.scene.load_derivative(M.z[:-1], M.load, M.loads)
         d, b[k] = b[k], 0.0
         self.c = M.unit.take(M.K)
-        self.inner = M.K.lu()
+        self.inner = M.K.factor()
         self.z = self.inner.solve(b)
         self.schur = d - float(self.c @ self.z)
         self.singular = bool(self.inner.singular or self.schur == 0.0 or not np.isfinite(self.schur))

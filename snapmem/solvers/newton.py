@@ -1,11 +1,13 @@
 """Newton's method on a scene's residual, and equilibria reached by loading from rest.
 
-Each iteration is one assembly (gradient and banded K at the trial point) and one band LU
-solve. The step is cut (i) to keep free radii positive (fraction to the boundary), (ii) by
-halving until the trial state is inside the model's domain (Gent lock, collapsed edges), and
-(iii) by halving until the residual norm falls (Armijo on |R|^2, for which the Newton
-direction is always a descent direction). The assembly at an accepted trial point is the next
-iteration's, so an iteration costs one assembly unless a step is cut.
+Each iteration is one assembly (gradient and banded K at the trial point) and one band
+factorisation and solve. The step is cut (i) to keep free radii positive (fraction to the
+boundary), (ii) by halving until the trial state is inside the model's domain (Gent lock,
+collapsed edges), and (iii) by halving until the residual norm falls (Armijo on |R|^2, for which
+the Newton direction is always a descent direction). The acceptance rules and their constants
+are :mod:`snapmem.solvers.rules`, shared with the compiled time step. The assembly at an
+accepted trial point is the next iteration's, so an iteration costs one assembly unless a step
+is cut.
 """
 
 from __future__ import annotations
@@ -19,6 +21,9 @@ import numpy as np
 
 from snapmem.errors import check_array, check_int, check_real
 from snapmem.model.scene import Evaluation, Scene
+from snapmem.solvers import rules
+from snapmem.solvers.status import STATUSES, Status  # noqa: F401  (STATUSES: cited here by README and sweeps)
+from snapmem.threads import single_threaded
 
 log = logging.getLogger(__name__)
 
@@ -47,25 +52,6 @@ class NewtonOptions:
         check_int("max_cuts", self.max_cuts, minimum=0)
 
 
-#: How a solve can end: NewtonReport.status is one of these words (``reason`` says more).
-STATUSES = {
-    "converged": "max |R| on the free degrees of freedom is below the tolerance",
-    "max_iterations": "the iteration limit was reached before convergence",
-    "step_too_small": "no step along the Newton direction reduces the residual (line search failed)",
-    "left_domain": "every trial step, however short, left the model's domain (material lock, "
-                   "non-positive radius, collapsed edge)",
-    "singular": "the tangent stiffness is singular",
-    "not_finite": "the residual is NaN or inf",
-    "no_equilibrium": "loading from rest cannot reach the load: a limit point or the end of the "
-                      "material's domain lies before it",
-    "failed": "any other failure (see reason)",
-}
-_REASON_STATUS = (("converged", "converged"), ("max iterations", "max_iterations"),
-                  ("line search failed", "step_too_small"), ("left the model's domain", "left_domain"),
-                  ("singular", "singular"), ("residual is not finite", "not_finite"),
-                  ("no equilibrium", "no_equilibrium"))
-
-
 @dataclass
 class NewtonReport:
     """How a Newton solve went.
@@ -79,11 +65,13 @@ class NewtonReport:
         max |R| over free degrees of freedom at the returned state [N].
     reason : str
         'converged', or why not ('max iterations', 'singular tangent', 'line search failed: ...').
-        ``status`` is the same as one word of :data:`STATUSES`.
     step_cuts : int
         Total step halvings.
     history : list of float
         Residual norm before each iteration.
+    status : Status
+        The outcome in one word of :data:`STATUSES` (a str-Enum: it compares, prints and
+        serialises as that word), set where the report's ``reason`` is.
     """
 
     converged: bool
@@ -92,16 +80,7 @@ class NewtonReport:
     reason: str
     step_cuts: int = 0
     history: list = field(default_factory=list)
-
-    @property
-    def status(self) -> str:
-        """One word of :data:`STATUSES` for this report's ``reason``."""
-        if self.converged:
-            return "converged"
-        for start, status in _REASON_STATUS:
-            if self.reason.startswith(start):
-                return status
-        return "failed"
+    status: Status = Status.failed
 
     def lines(self) -> list[str]:
         return [f"converged: {self.converged}", f"iterations: {self.iterations}",
@@ -143,28 +122,25 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
     why = inadmissible(q)
     if why is not None:
         return q, None, NewtonReport(False, 0, float("nan"),
-                                     f"left the model's domain: the starting state is outside it ({why})")
+                                     f"left the model's domain: the starting state is outside it ({why})",
+                                     status=Status.left_domain)
     ev = residual_and_jacobian(q)
-    norm = _norm(ev.residual)
+    norm = rules.max_norm(ev.residual)
     last_step = np.inf
-    report = NewtonReport(False, 0, norm, "max iterations")
+    report = NewtonReport(False, 0, norm, "max iterations", status=Status.max_iterations)
     for _ in range(options.max_iterations):
         report.history.append(norm)
-        floor_tol = max(tol, ev.residual_floor)
-        if norm <= floor_tol or (norm <= 1e3 * floor_tol and last_step <= 1e-10 * np.abs(q).max()):
-            # converged; or the last Newton step was at the rounding of q and the residual is within
-            # 1e3 of the tolerance: the rounding floor of a stiff state (a law near its lock). A
-            # slowly converging singular problem takes steps far larger than that.
-            report.converged, report.reason = True, "converged"
+        if rules.converged(norm, tol, ev.residual_floor, last_step, q):
+            report.converged, report.reason, report.status = True, "converged", Status.converged
             break
         if not math.isfinite(norm):
-            report.reason = "residual is not finite"
+            report.reason, report.status = "residual is not finite", Status.not_finite
             break
-        lu = ev.stiffness.lu()
-        if lu.singular:
-            report.reason = "singular tangent stiffness"
+        factors = ev.stiffness.factor()
+        if factors.singular:
+            report.reason, report.status = "singular tangent stiffness", Status.singular
             break
-        dx = lu.solve(-ev.residual)
+        dx = factors.solve(-ev.residual)
         dq = np.zeros_like(q)
         dq[free] = dx
         alpha = min(1.0, max_step(q, dq))
@@ -178,32 +154,28 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
             if outside is None:
                 ev_trial = residual_and_jacobian(trial)
                 if merit == "energy":
-                    trial_norm = _norm(ev_trial.residual)
-                    if np.isfinite(ev_trial.energy) and np.isfinite(trial_norm) and (
-                            ev_trial.energy <= ev.energy + 1e-4 * alpha * min(slope, 0.0) or trial_norm <= 0.5 * norm):
+                    if rules.energy_step_accepted(ev_trial.energy, rules.max_norm(ev_trial.residual), ev.energy, norm,
+                                                  alpha, slope):
                         break
-                else:
-                    trial_squared = float(ev_trial.residual @ ev_trial.residual)
-                    if math.isfinite(trial_squared) and trial_squared <= (1.0 - 1e-4 * alpha) * squared:
-                        break
-            alpha *= 0.5
+                elif rules.residual_step_accepted(float(ev_trial.residual @ ev_trial.residual), squared, alpha):
+                    break
+            alpha *= rules.CUT
             report.step_cuts += 1
         else:
             what = "lowers the energy" if merit == "energy" else "reduces the residual"
-            report.reason = (f"line search failed: no step {what}" if outside is None else
-                             f"left the model's domain: every trial step was outside it ({outside})")
+            if outside is None:
+                report.reason, report.status = f"line search failed: no step {what}", Status.step_too_small
+            else:
+                report.reason = f"left the model's domain: every trial step was outside it ({outside})"
+                report.status = Status.left_domain
             break
         q, ev = trial, ev_trial
-        norm = _norm(ev.residual)
-        last_step = alpha * float(np.abs(dx).max()) if dx.size else 0.0
+        norm = rules.max_norm(ev.residual)
+        last_step = rules.step_length(alpha, dx)
     report.residual_norm = norm
-    if not report.converged and norm <= max(tol, ev.residual_floor):
-        report.converged, report.reason = True, "converged"
+    if not report.converged and rules.converged_at_end(norm, tol, ev.residual_floor):
+        report.converged, report.reason, report.status = True, "converged", Status.converged
     return q, ev, report
-
-
-def _norm(r: np.ndarray) -> float:
-    return float(np.abs(r).max()) if r.size else 0.0
 
 
 @dataclass

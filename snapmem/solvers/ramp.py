@@ -15,6 +15,7 @@ from typing import Callable, Mapping
 
 from snapmem.model.scene import Scene
 from snapmem.solvers.newton import Equilibrium, NewtonOptions, solve, start_guess
+from snapmem.solvers.status import Status
 from snapmem.threads import single_threaded
 
 #: The order in which :func:`ramp` applies loads (the paper inflates, then actuates).
@@ -58,6 +59,7 @@ def ramp(scene: Scene, loads: Mapping[str, float] | None = None, options: Newton
     last = solve(scene, current, q0=start_guess(scene, current), options=options)
     if not last.converged:
         last.report.reason = f"no equilibrium at the start of the load path: {last.report.reason}"
+        last.report.status = Status.no_equilibrium
         return last
     iterations, notes = last.report.iterations, []
     for name in order:
@@ -101,7 +103,7 @@ def _ramp_load(scene, start: Equilibrium, loads, name, value, options, min_fract
         if dt < min_fraction_step:
             snapped = None if snap is None else snap(scene, last, name, value)
             if snapped is None:
-                last.report.converged = False
+                last.report.converged, last.report.status = False, Status.no_equilibrium
                 last.report.reason = (f"no equilibrium on the load path beyond {name} = {at(t)[name]:.6g} "
                                       "(a limit point or the edge of the material's domain)")
                 return last, iterations, None

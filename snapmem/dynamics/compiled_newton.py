@@ -1,0 +1,109 @@
+"""The compiled time step's Newton solve: damped Newton on the step's incremental potential, as
+``snapmem.solvers.newton.newton(..., merit='energy')`` does it, with the same acceptance rules
+(:mod:`snapmem.solvers.rules`), in one compiled call.
+
+A solve ends with one of the codes below; :data:`OUTCOMES` gives each its
+:class:`~snapmem.solvers.status.Status` and the report's reason.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from snapmem.dynamics.compiled_assembly import admissible, assemble, max_step, state_ok
+from snapmem.kernels.bordered import bordered_solve
+from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
+from snapmem.solvers.rules import (CUT, converged, converged_at_end, energy_step_accepted, inertia_tolerance, max_norm,
+                                   step_length)
+from snapmem.solvers.status import Status
+
+#: How a compiled solve ends (an index into OUTCOMES), or HANDED_BACK: a step whose tangent the
+#: LDL^T cannot take, for the general Newton (with its pivoted LU) to solve.
+(CONVERGED, MAX_ITERATIONS, STEP_TOO_SMALL, LEFT_DOMAIN, SINGULAR, NOT_FINITE, START_OUTSIDE) = range(7)
+HANDED_BACK = -1
+#: (status, reason) of each code, as the Python Newton words them.
+OUTCOMES = (
+    (Status.converged, "converged"),
+    (Status.max_iterations, "max iterations"),
+    (Status.step_too_small, "line search failed: no step lowers the energy"),
+    (Status.left_domain, "left the model's domain: every trial step was outside it"),
+    (Status.singular, "singular tangent stiffness"),
+    (Status.not_finite, "residual is not finite"),
+    (Status.left_domain, "left the model's domain: the starting state is outside it"),
+)
+
+
+@njit(cache=True, nogil=True)
+def time_step(anchor, velocity, h, mass, damping, fallback, P, pressure, a_el, tol, size, max_iterations, max_cuts):
+    """The step's inertia M / h^2 + C / h, momentum M v / h and guess anchor + h v (on the free
+    degrees of freedom; ``mass``, ``damping`` there), the tolerance kept above the inertia term's
+    rounding floor (:func:`snapmem.solvers.rules.inertia_tolerance`), then :func:`step_newton`."""
+    free = P.free
+    n = free.size
+    inertia, momentum = np.empty(n), np.empty(n)
+    for i in range(n):
+        inertia[i] = mass[i] / (h * h) + damping[i] / h
+        momentum[i] = mass[i] * velocity[free[i]] / h
+    tol = inertia_tolerance(tol, np.max(inertia), size)
+    return step_newton(anchor + h * velocity, fallback, anchor, P, pressure, a_el, inertia, momentum, tol,
+                       max_iterations, max_cuts)
+
+
+@njit(cache=True, nogil=True)
+def step_newton(guess, fallback, anchor, P, pressure, a_el, inertia, momentum, tol, max_iterations, max_cuts):
+    """Damped Newton on the step's incremental potential: snapmem.solvers.newton.newton with
+    merit='energy' (which documents every rule here). Returns (y, code, iterations, cuts, norm),
+    code one of this module's (an index into OUTCOMES, or HANDED_BACK)."""
+    if admissible(guess, P):
+        q = guess.copy()
+    else:
+        q = fallback.copy()
+        if not admissible(q, P):
+            return q, START_OUTSIDE, 0, 0, np.nan
+    energy, residual, lower, border, corner, floor = assemble(q, P, pressure, a_el, inertia, anchor, momentum, 2)
+    norm = max_norm(residual)
+    free = P.free
+    last_step = np.inf
+    iterations = cuts = 0
+    code = MAX_ITERATIONS
+    dq = np.zeros(q.size)
+    for _ in range(max_iterations):
+        if converged(norm, tol, floor, last_step, q):
+            code = CONVERGED
+            break
+        if not np.isfinite(norm):
+            code = NOT_FINITE
+            break
+        dx, ok = bordered_solve(lower, border, corner, -residual, REFINE_ON_CANCELLATION)
+        if not ok:
+            return q, HANDED_BACK, iterations, cuts, norm
+        for i in range(free.size):
+            dq[free[i]] = dx[i]
+        alpha = min(1.0, max_step(q, dq, P))
+        slope = residual @ dx
+        iterations += 1
+        accepted = inside = False
+        trial = q
+        e_t, r_t, lo_t, bo_t, co_t, fl_t, n_t = energy, residual, lower, border, corner, floor, norm
+        for _cut in range(max_cuts + 1):
+            trial = q + alpha * dq
+            inside = state_ok(trial, P)          # the contacts' gaps: the barriers' energy is inf at a gap <= 0
+            if inside:
+                e_t, r_t, lo_t, bo_t, co_t, fl_t = assemble(trial, P, pressure, a_el, inertia, anchor, momentum, 2)
+                inside = e_t < np.inf
+                n_t = max_norm(r_t)
+                if energy_step_accepted(e_t, n_t, energy, norm, alpha, slope):
+                    accepted = True
+                    break
+            alpha *= CUT
+            cuts += 1
+        if not accepted:
+            code = STEP_TOO_SMALL if inside else LEFT_DOMAIN
+            break
+        q, energy, residual, lower, border, corner, floor = trial, e_t, r_t, lo_t, bo_t, co_t, fl_t
+        norm = n_t
+        last_step = step_length(alpha, dx)
+    if code != CONVERGED and converged_at_end(norm, tol, floor):
+        code = CONVERGED
+    return q, code, iterations, cuts, norm

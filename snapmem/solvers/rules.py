@@ -1,0 +1,80 @@
+"""Newton's acceptance rules, written once for the Python Newton (:func:`snapmem.solvers.newton.newton`)
+and the compiled time step (:mod:`snapmem.dynamics.compiled_step`) alike.
+
+The constants are module-level floats (numba freezes them into the compiled rules) and are
+collected in :data:`RULES` for reading; the rules are small compiled functions of scalars that
+both paths call, so the two cannot drift apart.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+#: Armijo fraction: a step is accepted when the merit falls by this fraction of its linear model.
+ARMIJO = 1e-4
+#: A rejected step is multiplied by this (halving).
+CUT = 0.5
+#: Converged at rounding: the residual within this factor of the tolerance ...
+STALL_FACTOR = 1e3
+#: ... while the last step was below this fraction of max |q|.
+STALL_STEP = 1e-10
+#: With the 'energy' merit, a step that multiplies max |R| by at most this is accepted too.
+RESIDUAL_FALL = 0.5
+#: The inertia term's rounding floor, STALL_FACTOR eps max(M / h^2) |q|: a time step's tolerance stays above it.
+INERTIA_FLOOR = 1e3 * float(np.finfo(np.float64).eps)
+
+NewtonRules = namedtuple("NewtonRules", "armijo cut stall_factor stall_step residual_fall inertia_floor")
+#: The constants above, together.
+RULES = NewtonRules(ARMIJO, CUT, STALL_FACTOR, STALL_STEP, RESIDUAL_FALL, INERTIA_FLOOR)
+
+
+@njit(cache=True, nogil=True)
+def max_norm(r):
+    """max |r_i| (0 for an empty r; NaN if r has one): the residual norm both solves converge in."""
+    return np.max(np.abs(r)) if r.size else 0.0
+
+
+@njit(cache=True, nogil=True)
+def step_length(alpha, dx):
+    """max |alpha dx_i| of an accepted step (0 for an empty dx): what :func:`converged` compares with |q|."""
+    return alpha * np.max(np.abs(dx)) if dx.size else 0.0
+
+
+@njit(cache=True, nogil=True)
+def converged(norm, tol, floor, last_step, q):
+    """Whether max |R| = ``norm`` [N] is converged: at most max(tol, floor) (the tolerance, or the
+    residual's rounding floor), or within STALL_FACTOR of that while the last Newton step was at the
+    rounding of q (a stiff state near a law's lock; a slowly converging singular problem takes
+    steps far larger than that)."""
+    floor_tol = max(tol, floor)
+    return norm <= floor_tol or (norm <= STALL_FACTOR * floor_tol and last_step <= STALL_STEP * np.max(np.abs(q)))
+
+
+@njit(cache=True, nogil=True)
+def converged_at_end(norm, tol, floor):
+    """Whether a solve that stopped (iterations or line search exhausted) is converged all the same."""
+    return norm <= max(tol, floor)
+
+
+@njit(cache=True, nogil=True)
+def energy_step_accepted(trial_energy, trial_norm, energy, norm, alpha, slope):
+    """The 'energy' merit (a minimisation): the trial energy is finite and falls by ARMIJO of the
+    step's slope (``slope`` = R . dx, clipped at 0), or its max |R| falls to RESIDUAL_FALL of ``norm``."""
+    return (np.isfinite(trial_energy) and np.isfinite(trial_norm)
+            and (trial_energy <= energy + ARMIJO * alpha * min(slope, 0.0) or trial_norm <= RESIDUAL_FALL * norm))
+
+
+@njit(cache=True, nogil=True)
+def residual_step_accepted(trial_squared, squared, alpha):
+    """The 'residual' merit (any equilibrium): |R|^2 finite and fallen by the Armijo fraction."""
+    return np.isfinite(trial_squared) and trial_squared <= (1.0 - ARMIJO * alpha) * squared
+
+
+@njit(cache=True, nogil=True)
+def inertia_tolerance(tol, max_inertia, size):
+    """A time step's tolerance [N]: ``tol``, kept above the inertia term's rounding floor
+    INERTIA_FLOOR max(M / h^2) ``size`` (which grows as h falls)."""
+    return max(tol, INERTIA_FLOOR * max_inertia * size)
