@@ -16,7 +16,6 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "snapmem"
 LAYERS = {"errors": 0, "threads": 0, "io": 0, "_moved": 0, "_version": 0,
@@ -111,7 +110,6 @@ def test_package_code_uses_the_new_module_paths():
     assert stale == []
 
 
-@pytest.mark.xfail(strict=True, reason="the layered split is under way: remove when it passes")
 def test_no_module_over_500_lines():
     long = {module_name(p): n for p in PACKAGE.rglob("*.py") if (n := len(p.read_text().splitlines())) > MAX_LINES}
     assert long == {}
