@@ -1,9 +1,8 @@
 """BLAS runs single-threaded inside snapmem's drivers.
 
 snapmem's heavy work is LAPACK's band routines, which are sequential, and its parallelism is whole
-processes (sweeps). Threaded BLAS only slows the small dense products around them: on this 2-core
-machine, shared with other work, numpy's QR of a 3200 x 6 block took 13.9 ms with OpenBLAS's
-threads and 1.9 ms without (a traced torus at N = 1600 spent 9 of its 14 s there). Drivers
+processes (sweeps). Threaded BLAS only slows the small dense products around them (measured in
+docs/performance.md). Drivers
 (trace, fold_curve, equilibrium, simulate, hysteresis) run under :func:`single_threaded`; nested
 calls pay nothing, and the caller's setting is restored on return.
 """
@@ -20,9 +19,8 @@ _controller = None
 
 
 def _blas():
-    """One controller for the process: building it scans the loaded libraries (0.4 ms, which the
-    profile of a 23 ms ball_throw showed); limiting through it costs 0.01 ms. Made on first use,
-    after numpy's and scipy's BLAS are loaded (importing snapmem loads both)."""
+    """One controller for the process, made on first use (building it scans the loaded libraries,
+    which costs more than limiting through it), after numpy's and scipy's BLAS are loaded."""
     global _controller
     if _controller is None:
         _controller = ThreadpoolController()
@@ -31,7 +29,7 @@ def _blas():
 
 @contextmanager
 def blas_single_thread():
-    """Limit BLAS to one thread for the duration (re-entrant; 0.01 ms at the outermost level)."""
+    """Limit BLAS to one thread for the duration (re-entrant: nested calls pay nothing)."""
     global _depth
     if _depth:
         yield
