@@ -53,6 +53,9 @@ class Point:
     kind: PointKind = PointKind.STEP
     located: bool = False
     coupling: float = float("nan")   # |phi0 . dR/dlambda| / (|phi0| |dR/dlambda|) at a critical point
+    crossed: int = -1                # eigenvalues that crossed zero at a critical point
+    symmetry_broken: bool = False    # a BP whose null vector couples to the load (the mesh breaks its symmetry)
+    mode: int = -1                   # Legendre mode n of a BP's null vector on a spherical reference (-1: none)
     vectors: np.ndarray | None = field(default=None, repr=False)   # eigenvectors of ``eigs``
     subspace: np.ndarray | None = field(default=None, repr=False)  # the eigen-iteration's last subspace
     measured: dict | None = field(default=None, repr=False)        # cache of the problem's measures
@@ -74,7 +77,10 @@ class Branch:
         negative_eigs, stable, min_tension, taut, point ('' or 'LP' or 'BP'), and the scene's probes.
     points : pandas.DataFrame
         The critical points: ``kind`` and the same quantities at the located point, ``located``
-        (False if only bracketed) and ``coupling`` (|phi0 . dR/dlambda| normalised).
+        (False if only bracketed), ``coupling`` (|phi0 . dR/dlambda| normalised), ``crossed``
+        (how many eigenvalues crossed zero), ``symmetry_broken`` (a BP whose null vector couples
+        to the load above 1e-6: the mesh breaks the symmetry, the bifurcation is imperfect) and
+        ``mode`` (the Legendre mode n of a BP's null vector on a spherical reference, else -1).
     rejections : pandas.DataFrame
         Every rejected or cut step: step, s, ds, reason.
     status : str

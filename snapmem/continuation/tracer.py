@@ -325,10 +325,12 @@ def _assemble(scene, control, pb, points, critical, rejections, status, outcome,
     for c in critical:
         m = pb.point_measures(c)
         crit_rows.append({"kind": PointKind(c.kind).value, "s": c.s, "control": c.lam, **m,
-                          "min_eig": c.test_value, "located": c.located, "coupling": c.coupling})
+                          "min_eig": c.test_value, "located": c.located, "coupling": c.coupling,
+                          "crossed": c.crossed, "symmetry_broken": c.symmetry_broken, "mode": c.mode})
     points_table = pd.DataFrame(crit_rows, columns=None if crit_rows else
                                 ["kind", "s", "control", "pressure", "voltage", "E_hat", "volume", "u_max",
-                                 "stretch_max", "min_tension", "taut", "min_eig", "located", "coupling"])
+                                 "stretch_max", "min_tension", "taut", "min_eig", "located", "coupling",
+                                 "crossed", "symmetry_broken", "mode"])
     stats = {"steps": int(sum(1 for p in points if p.kind == PointKind.STEP)) - 1, "rejected": len(rejections),
              "newton_iterations": tracer.newton_iterations, "evaluations": tracer.evaluations}
     return Branch(scene, control, table, points_table,
