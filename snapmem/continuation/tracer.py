@@ -172,7 +172,8 @@ class Tracer:
 @single_threaded
 def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | None = None,
           options: ContinuationOptions = ContinuationOptions(), start: tuple | None = None,
-          progress: Callable[[Point, dict], None] | None = None, events: Sequence[Event] = ()) -> Branch:
+          progress: Callable[[Point, dict], None] | None = None, events: Sequence[Event] = (),
+          toward: np.ndarray | None = None) -> Branch:
     """Trace the equilibrium branch of ``scene`` in ``control`` by pseudo-arclength continuation.
 
     Parameters
@@ -192,6 +193,9 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     events : sequence of Event, optional
         More events to watch for (snapmem.continuation.events), called after those the options
         and ``until`` ask for.
+    toward : (n + 1,) array, optional
+        Orient the first tangent along this (x, lambda) direction (branch switching starts a new
+        branch this way) instead of by ``options.direction``.
 
     Returns
     -------
@@ -204,7 +208,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     F, J = pb.evaluate(x0, lam0)
     if np.max(np.abs(F)) > 1e3 * tracer.tol:
         raise SolverError(f"start state is not an equilibrium (max |R| = {np.max(np.abs(F)):.3e})")
-    first = tracer.finish(Point(x0, lam0), J, None)
+    first = tracer.finish(Point(x0, lam0), J, None if toward is None else Point(x0, lam0, tangent=toward))
     points = [first]
     rejections = []
     critical = []
