@@ -23,8 +23,8 @@ import math
 
 import numpy as np
 
-from snapmem.continuation import branch as branch_module
-from snapmem.continuation.branch import Branch, Point, PointKind
+
+from snapmem.continuation.branch import BRANCH_SWITCHING, Branch, Point, PointKind
 from snapmem.continuation.diagram import Diagram
 from snapmem.continuation.locate import SYMMETRY_COUPLING
 from snapmem.continuation.options import ContinuationOptions
@@ -181,4 +181,4 @@ def _null_vector(pb, J, c: Point) -> np.ndarray:
     return phi
 
 
-branch_module.BRANCH_SWITCHING[:] = [switch_branch]
+BRANCH_SWITCHING[:] = [switch_branch]
