@@ -108,6 +108,8 @@ def cmd_trace(args) -> int:
         display.show(f"trace {scene.name}: step {counter['n']}  {control} = {point.lam:.6g} "
                      f"[{display.elapsed:.1f} s]")
 
+    if args.switch:
+        return _trace_switch(args, scene, control, until, options)
     branch = trace(scene, control, until=until, options=options, start=start, progress=progress)
     display.close()
     meta = {"command": "trace", "scene": scene.name, "parameters": scene.parameters, "control": control,
@@ -131,6 +133,46 @@ def cmd_trace(args) -> int:
               f"stretch_max = {row['stretch_max']:.6g}  located = {row['located']}")
     if branch.points.empty:
         print("no critical points")
+    return 0
+
+
+def _trace_switch(args, scene, control, until, options) -> int:
+    """``trace --switch BRANCH.npz:K``: trace the branch bifurcating at row K of the saved
+    branch's critical points, both ways; ``--out`` writes the diagram (CSV with a ``branch``
+    column, .points.csv, .npz of states, .json sidecar)."""
+    from snapmem.continuation import Diagram, Point, load_points
+    from snapmem.continuation.switching import switch_at
+    path, sep, row = args.switch.rpartition(":")
+    if not sep or not path:
+        raise SnapmemError(f"--switch {args.switch!r}: must be BRANCH.npz:K, K a row of its points table")
+    try:
+        k = int(row)
+    except ValueError:
+        raise SnapmemError(f"--switch {args.switch!r}: K = {row!r} must be an integer") from None
+    saved = load_points(path)
+    if saved["meta"]["control"] != control:
+        raise SnapmemError(f"--switch: the branch was traced in {saved['meta']['control']!r}; "
+                           f"use --control {saved['meta']['control']}")
+    critical = [i for i, kind in enumerate(saved["kind"]) if kind in ("LP", "BP")]
+    if not -len(critical) <= k < len(critical):
+        raise SnapmemError(f"--switch row {k}: the branch has {len(critical)} critical points")
+    i = critical[k]
+    if saved["kind"][i] != "BP":
+        raise SnapmemError(f"--switch row {k}: the point is {str(saved['kind'][i])!r}, not a BP "
+                           f"(BP rows: {[j for j, c in enumerate(critical) if saved['kind'][c] == 'BP']})")
+    c = Point(np.asarray(saved["x"][i], float), float(saved["lam"][i]), tangent=np.asarray(saved["tangent"][i], float))
+    halves = switch_at(scene, control, c, until=until, options=options)
+    diagram = Diagram()
+    for sign, child in halves:
+        diagram.add(child)
+        print(f"branch {len(diagram.branches) - 1} (direction {sign:+d}): {child.status}; "
+              f"starts at {control} = {child.states[0].lam:.10g}, points: {len(child.table)}")
+        for _, r in child.points.iterrows():
+            print(f"    {r['kind']}: {control} = {r['control']:.10g}  stretch_max = {r['stretch_max']:.6g}")
+    if not halves:
+        raise SolverError(f"--switch: no branch could be started at row {k}")
+    if args.out:
+        diagram.save(args.out)
     return 0
 
 
@@ -311,6 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-steps", type=int, default=2000)
     p.add_argument("--restart", metavar="BRANCH.npz", help="start from a point saved by an earlier trace")
     p.add_argument("--start-index", type=int, default=-1, help="which saved point to restart from (default last)")
+    p.add_argument("--switch", metavar="BRANCH.npz:K", help="switch at the BP in row K of the points table of a "
+                   "branch saved by trace --out and trace the new branch both ways (--out writes the diagram)")
     p.set_defaults(func=cmd_trace)
 
     p = sub.add_parser("fold", help="follow a limit point as a second parameter varies")

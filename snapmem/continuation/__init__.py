@@ -3,8 +3,8 @@
 Modules: ``options`` (ContinuationOptions, FoldOptions, CONTROLS), ``branch`` (Point, Branch,
 PointKind, Outcome, load_points), ``problems`` (what is continued), ``tracer`` (the
 predictor-corrector loop, :func:`trace`), ``events`` (what the loop watches for), ``locate``
-(locating and classifying points between two steps), ``folds`` (:func:`fold_curve`) and
-``hysteresis``.
+(locating and classifying points between two steps), ``folds`` (:func:`fold_curve`),
+``switching`` (:func:`switch_branch`), ``diagram`` (:class:`Diagram`), ``modes`` and ``hysteresis``.
 """
 
 from snapmem.continuation.branch import Branch, Outcome, Point, PointKind, load_points
@@ -14,6 +14,8 @@ from snapmem.continuation.folds import fold_curve
 from snapmem.continuation.options import CONTROLS, ContinuationOptions, FoldOptions
 from snapmem.continuation.problems import LoadProblem, VolumeProblem, make_problem
 from snapmem.continuation.tracer import Tracer, snap_by_tracing, trace
+from snapmem.continuation.diagram import Connection, Diagram, read_diagram
+from snapmem.continuation.switching import bifurcation_direction, switch_branch
 
 __all__ = [
     "CONTROLS", "ContinuationOptions", "FoldOptions",
@@ -23,4 +25,5 @@ __all__ = [
     "Event", "Step", "Found", "Stop", "CriticalPoints", "SaveAt", "Until", "StopAtFirstLimit", "LossOfTension",
     "events_from",
     "fold_curve",
+    "Diagram", "Connection", "read_diagram", "switch_branch", "bifurcation_direction",
 ]

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from snapmem.continuation.problems import make_problem
-from snapmem.errors import read_npz
+from snapmem.errors import SnapmemError, read_npz
 from snapmem.io.results import write_npz
 from snapmem.model.scene import Scene
 
@@ -53,6 +53,9 @@ class Point:
     kind: PointKind = PointKind.STEP
     located: bool = False
     coupling: float = float("nan")   # |phi0 . dR/dlambda| / (|phi0| |dR/dlambda|) at a critical point
+    crossed: int = -1                # eigenvalues that crossed zero at a critical point
+    symmetry_broken: bool = False    # a BP whose null vector couples to the load (the mesh breaks its symmetry)
+    mode: int = -1                   # Legendre mode n of a BP's null vector on a spherical reference (-1: none)
     vectors: np.ndarray | None = field(default=None, repr=False)   # eigenvectors of ``eigs``
     subspace: np.ndarray | None = field(default=None, repr=False)  # the eigen-iteration's last subspace
     measured: dict | None = field(default=None, repr=False)        # cache of the problem's measures
@@ -74,7 +77,10 @@ class Branch:
         negative_eigs, stable, min_tension, taut, point ('' or 'LP' or 'BP'), and the scene's probes.
     points : pandas.DataFrame
         The critical points: ``kind`` and the same quantities at the located point, ``located``
-        (False if only bracketed) and ``coupling`` (|phi0 . dR/dlambda| normalised).
+        (False if only bracketed), ``coupling`` (|phi0 . dR/dlambda| normalised), ``crossed``
+        (how many eigenvalues crossed zero), ``symmetry_broken`` (a BP whose null vector couples
+        to the load above 1e-6: the mesh breaks the symmetry, the bifurcation is imperfect) and
+        ``mode`` (the Legendre mode n of a BP's null vector on a spherical reference, else -1).
     rejections : pandas.DataFrame
         Every rejected or cut step: step, s, ds, reason.
     status : str
@@ -95,6 +101,29 @@ class Branch:
 
     def limit_points(self) -> pd.DataFrame:
         return self.points[self.points["kind"] == PointKind.LP.value]
+
+    def critical_state(self, k: int) -> Point:
+        """The located state of row ``k`` of the points table."""
+        if not -len(self.points) <= k < len(self.points):
+            raise SnapmemError(f"point row {k}: the branch has {len(self.points)} critical points "
+                               f"(rows 0..{len(self.points) - 1})")
+        s = float(self.points["s"].iloc[k])
+        return min((p for p in self.states if p.kind in (PointKind.LP, PointKind.BP)), key=lambda p: abs(p.s - s))
+
+    def scene_state(self, p: Point) -> np.ndarray:
+        """The full state q [m] of point ``p``."""
+        return make_problem(self.scene, self.control).state(p.x, p.lam)[0]
+
+    def switch(self, k: int, **kwargs):
+        """Switch to the branch bifurcating at row ``k`` of the points table and trace it both ways:
+        a :class:`~snapmem.continuation.diagram.Diagram` of this branch and the two new halves
+        (keywords: those of :func:`snapmem.continuation.switching.switch_branch`, which
+        registers itself in :data:`BRANCH_SWITCHING` when snapmem.continuation is imported: the
+        switch traces new branches, and the tracer imports this module)."""
+        if not BRANCH_SWITCHING:
+            raise SnapmemError("branch switching is not available: import snapmem.continuation")
+        return BRANCH_SWITCHING[0](self, k, **kwargs)
+
 
     def save(self, path) -> None:
         """Save every point's state, tangent, inertia and step as a compressed .npz (no pickle).
@@ -130,3 +159,6 @@ def load_points(path) -> dict:
 def _jsonable(d):
     return {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in d.items()}
 
+
+#: The branch-switching function (snapmem.continuation.switching.switch_branch), registered on import.
+BRANCH_SWITCHING: list = []

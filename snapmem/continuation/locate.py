@@ -5,8 +5,11 @@ eigenvalue, the tangent's parameter component) is found by Brent's method on the
 between two accepted points; every point on the way is converged by the tracer's corrector.
 Where following the crossing eigenvalue fails, a critical point is polished by Newton on the
 minimally extended system [R = 0, g = 0] (:func:`fold_newton`, which fold curves use too). Its
-null vector phi0 classifies it (MODEL.md section 3): a limit point (LP) has
-phi0 . dR/dlambda != 0, a bifurcation point (BP) has phi0 . dR/dlambda = 0.
+tangent classifies it (MODEL.md section 3): a limit point (LP) is where the parameter turns back
+(the tangent's parameter component changes sign), a bifurcation point (BP) is where the inertia
+changes and the parameter keeps its direction. The coupling phi0 . dR/dlambda is reported, not
+used to classify: modes the continuum separates from the load by symmetry couple to it on a mesh
+at discretisation order.
 
 The functions take the tracer (snapmem.continuation.tracer) as their first argument: its problem
 ``pb``, options ``opt``, arclength inner product ``inner`` and ``point_at`` / ``finish``.
@@ -21,6 +24,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from snapmem.continuation.branch import Point, PointKind
+from snapmem.continuation.modes import legendre_mode
 from snapmem.continuation.options import FoldOptions
 from snapmem.errors import SolverError
 from snapmem.kernels.banded import BorderedMatrix
@@ -173,24 +177,48 @@ def _polish_critical(tracer, base: Point, p: Point, phi: np.ndarray):
 
 
 def _classify(tracer, c: Point, base: Point, p: Point) -> PointKind:
-    """LP if the null vector couples to dR/dlambda (or the parameter turns back), else BP; the
-    problem decides (:meth:`~snapmem.continuation.problems.LoadProblem.is_limit_point`)."""
+    """LP if the parameter turned back between base and p (the tangent's parameter component
+    changed sign), else BP (the inertia changed while the parameter kept its direction).
+
+    Also records on ``c``: ``coupling`` (|phi0 . dR/dlambda| normalised), ``crossed`` (how many
+    eigenvalues crossed zero), ``symmetry_broken`` (a BP whose null vector couples to the load
+    above :data:`SYMMETRY_COUPLING`: the mesh breaks the symmetry that separates the mode from
+    the load in the continuum, so on the mesh the bifurcation is imperfect) and ``mode`` (the
+    Legendre mode of the null vector on a spherical reference, else -1;
+    :func:`snapmem.continuation.modes.legendre_mode`).
+    """
     pb = tracer.pb
-    if c.located and c.vectors is not None:      # K's vector nearest zero, converged at the point
-        phi = c.vectors[:, np.argmin(np.abs(c.eigs))]
-    else:
-        _, J = pb.evaluate(c.x, c.lam)
-        K = pb.stiffness(J)
-        lu = K.factor()
-        phi = np.random.default_rng(0).normal(size=K.n)
-        if not lu.singular:
-            for _ in range(3):                       # inverse iteration: K is (nearly) singular here
-                phi = lu.solve(phi)
-                phi /= np.linalg.norm(phi)
+    phi = null_vector(tracer, c)
     Fl = pb.dF_dlam(c.x, c.lam)[: phi.size]
     c.coupling = abs(float(phi @ Fl)) / (np.linalg.norm(phi) * np.linalg.norm(Fl) + 1e-300)
+    c.crossed = abs(int(p.negative) - int(base.negative)) if None not in (p.negative, base.negative) else -1
     turned = base.tangent[-1] * p.tangent[-1] < 0
-    return PointKind.LP if pb.is_limit_point(c.coupling, turned) else PointKind.BP
+    kind = PointKind.LP if pb.is_limit_point(c.coupling, turned) else PointKind.BP
+    c.symmetry_broken = bool(kind == PointKind.BP and c.coupling > SYMMETRY_COUPLING)
+    c.mode = legendre_mode(tracer.scene, phi) if kind == PointKind.BP else -1
+    return kind
+
+
+#: The normalised coupling |phi0 . dR/dlambda| above which a BP's symmetry is broken by the mesh
+#: (exact BPs of a symmetric mesh are located with couplings below 1e-8).
+SYMMETRY_COUPLING = 1e-6
+
+
+def null_vector(tracer, c: Point) -> np.ndarray:
+    """The null vector phi0 of K at the critical point c (over the problem's state unknowns):
+    K's eigenvector nearest zero if converged there, else by three inverse iterations (O(N))."""
+    pb = tracer.pb
+    if c.located and c.vectors is not None:      # K's vector nearest zero, converged at the point
+        return c.vectors[:, np.argmin(np.abs(c.eigs))]
+    _, J = pb.evaluate(c.x, c.lam)
+    K = pb.stiffness(J)
+    lu = K.factor()
+    phi = np.random.default_rng(0).normal(size=K.n)
+    if not lu.singular:
+        for _ in range(3):                       # inverse iteration: K is (nearly) singular here
+            phi = lu.solve(phi)
+            phi /= np.linalg.norm(phi)
+    return phi
 
 
 def touching(tracer, a: Point, b: Point, c: Point):

@@ -128,9 +128,10 @@ class LoadProblem:
         return [self.dF_dlam(x, lam)]
 
     def is_limit_point(self, coupling: float, turned: bool) -> bool:
-        """Whether a critical point is a limit point (else a bifurcation point): its null vector
-        couples to dR/dlambda (``coupling``, normalised, above 1e-6) or the parameter turned back."""
-        return coupling > 1e-6 or turned
+        """Whether a critical point is a limit point (else a bifurcation point): the parameter
+        turned back. The ``coupling`` |phi0 . dR/dlambda| (normalised) does not decide: on a mesh
+        modes the continuum separates by symmetry couple to the load at discretisation order."""
+        return turned
 
     def point_measures(self, p) -> dict:
         """The measures at point ``p`` (cached on it)."""

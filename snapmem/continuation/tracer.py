@@ -172,7 +172,8 @@ class Tracer:
 @single_threaded
 def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | None = None,
           options: ContinuationOptions = ContinuationOptions(), start: tuple | None = None,
-          progress: Callable[[Point, dict], None] | None = None, events: Sequence[Event] = ()) -> Branch:
+          progress: Callable[[Point, dict], None] | None = None, events: Sequence[Event] = (),
+          toward: np.ndarray | None = None) -> Branch:
     """Trace the equilibrium branch of ``scene`` in ``control`` by pseudo-arclength continuation.
 
     Parameters
@@ -192,6 +193,9 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     events : sequence of Event, optional
         More events to watch for (snapmem.continuation.events), called after those the options
         and ``until`` ask for.
+    toward : (n + 1,) array, optional
+        Orient the first tangent along this (x, lambda) direction (branch switching starts a new
+        branch this way) instead of by ``options.direction``.
 
     Returns
     -------
@@ -204,7 +208,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     F, J = pb.evaluate(x0, lam0)
     if np.max(np.abs(F)) > 1e3 * tracer.tol:
         raise SolverError(f"start state is not an equilibrium (max |R| = {np.max(np.abs(F)):.3e})")
-    first = tracer.finish(Point(x0, lam0), J, None)
+    first = tracer.finish(Point(x0, lam0), J, None if toward is None else Point(x0, lam0, tangent=toward))
     points = [first]
     rejections = []
     critical = []
@@ -325,10 +329,12 @@ def _assemble(scene, control, pb, points, critical, rejections, status, outcome,
     for c in critical:
         m = pb.point_measures(c)
         crit_rows.append({"kind": PointKind(c.kind).value, "s": c.s, "control": c.lam, **m,
-                          "min_eig": c.test_value, "located": c.located, "coupling": c.coupling})
+                          "min_eig": c.test_value, "located": c.located, "coupling": c.coupling,
+                          "crossed": c.crossed, "symmetry_broken": c.symmetry_broken, "mode": c.mode})
     points_table = pd.DataFrame(crit_rows, columns=None if crit_rows else
                                 ["kind", "s", "control", "pressure", "voltage", "E_hat", "volume", "u_max",
-                                 "stretch_max", "min_tension", "taut", "min_eig", "located", "coupling"])
+                                 "stretch_max", "min_tension", "taut", "min_eig", "located", "coupling",
+                                 "crossed", "symmetry_broken", "mode"])
     stats = {"steps": int(sum(1 for p in points if p.kind == PointKind.STEP)) - 1, "rejected": len(rejections),
              "newton_iterations": tracer.newton_iterations, "evaluations": tracer.evaluations}
     return Branch(scene, control, table, points_table,

@@ -87,3 +87,29 @@ def balloon_dynamics(pressure, t_end, R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat
     sol = solve_ivp(rhs, (0.0, t_end), [1.0, 0.0], method="DOP853", rtol=rtol, atol=rtol,
                     dense_output=True, max_step=max_step)
     return sol.sol
+
+
+def sphere_bifurcation_criterion(lam, n, c1=0.4375, c2=0.0625, E_hat=0.0):
+    """The axisymmetric P_n bifurcation criterion of a uniformly inflated Mooney-Rivlin membrane
+    sphere at stretch ``lam`` (MODEL.md section 7; Haughton & Ogden 1978), electric term included:
+
+        l^2 (W11^2 - W12^2) + l W1 [(N - 1) W11 + 3 W12] - 2 W1^2,   N = n (n + 1),
+
+    with W1, W11, W12 the derivatives of W_eff = c1 (I1 - 3) + c2 (I2 - 3) - (E_hat^2 / 2)
+    l1^2 l2^2 at l1 = l2 = l (units of mu). Zero where P_n bifurcates (n = 0: the pressure
+    extrema; n = 1: with a pole held)."""
+    lam = np.asarray(lam, float)
+    N = n * (n + 1)
+    W1 = 2 * c1 * (lam - lam ** -5) + 2 * c2 * (lam ** 3 - lam ** -3) - E_hat ** 2 * lam ** 3
+    W11 = 2 * c1 * (1 + 3 * lam ** -6) + 2 * c2 * (3 * lam ** -4 + lam ** 2) - E_hat ** 2 * lam ** 2
+    W12 = 4 * c1 * lam ** -6 + 4 * c2 * lam ** 2 - 2 * E_hat ** 2 * lam ** 2
+    return lam ** 2 * (W11 ** 2 - W12 ** 2) + lam * W1 * ((N - 1) * W11 + 3 * W12) - 2 * W1 ** 2
+
+
+def sphere_bifurcation_stretches(n, c1=0.4375, c2=0.0625, E_hat=0.0, lam_max=10.0, samples=4000):
+    """The stretches in (1, lam_max] where :func:`sphere_bifurcation_criterion` of mode n
+    vanishes, ascending (sign changes on a fine grid refined by Brent's method)."""
+    grid = np.linspace(1.0 + 1e-9, lam_max, samples)
+    f = sphere_bifurcation_criterion(grid, n, c1, c2, E_hat)
+    return [brentq(sphere_bifurcation_criterion, a, b, args=(n, c1, c2, E_hat), xtol=1e-14)
+            for a, b, fa, fb in zip(grid[:-1], grid[1:], f[:-1], f[1:]) if fa * fb < 0]

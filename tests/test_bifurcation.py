@@ -1,0 +1,101 @@
+"""Critical points classified by the turning of the parameter, their Legendre modes, the sphere's
+bifurcation criterion, and branch switching at BPs (issue 16, items 1 and 2)."""
+
+import numpy as np
+import pytest
+from numpy.polynomial import legendre
+
+from snapmem.catalog.scenes import get_spec
+from snapmem.continuation import Diagram, read_diagram, trace
+from snapmem.continuation.modes import legendre_mode
+from snapmem.reference.exact import balloon_extrema, sphere_bifurcation_stretches
+
+
+@pytest.fixture(scope="module")
+def e_balloon():
+    scene = get_spec("balloon").build(("pressure",), E_hat=0.4, nodes=51)
+    return trace(scene, "pressure", until={"stretch": 3.2})
+
+
+def test_criterion_recovers_the_pressure_extrema_and_the_known_roots():
+    assert np.allclose(sphere_bifurcation_stretches(0), [lam for lam, _ in balloon_extrema()], rtol=1e-9)
+    assert sphere_bifurcation_stretches(1) == [] and sphere_bifurcation_stretches(2) == []
+    assert sphere_bifurcation_stretches(1, E_hat=0.4)[0] == pytest.approx(1.7725, abs=1e-4)
+    assert sphere_bifurcation_stretches(2, E_hat=0.4)[0] == pytest.approx(2.9152, abs=1e-4)
+
+
+def test_legendre_mode_of_pure_modes():
+    scene = get_spec("balloon").build(nodes=81)
+    m = scene.meridian
+    theta = np.arccos(m.z / 10.0)
+    for n in range(2, 7):
+        u_n = legendre.legval(np.cos(theta), np.eye(n + 1)[n])
+        phi = np.zeros(m.q.size)
+        phi[0::2], phi[1::2] = u_n * np.sin(theta), u_n * np.cos(theta) + 0.3   # + a rigid translation
+        assert legendre_mode(scene, phi) == n
+    assert legendre_mode(get_spec("torus").build(nodes=40), np.ones(80)) == -1
+
+
+def test_balloon_at_E_hat_0_has_two_limit_points_and_no_bp():
+    branch = trace(get_spec("balloon").build(nodes=41), "pressure", until={"stretch": 10.0})
+    assert list(branch.points["kind"]) == ["LP", "LP"]
+    assert np.allclose(branch.points["stretch"], [1.53519, 2.59398], atol=5e-3)
+
+
+def test_e_balloon_points_are_classified_by_turning(e_balloon):
+    pts = e_balloon.points
+    assert list(pts["kind"]) == ["LP", "BP", "BP"]
+    assert list(pts["mode"]) == [-1, 1, 2]
+    assert list(pts["crossed"]) == [1, 1, 1]
+    # the P1 BP is exact on the up-down symmetric mesh; P2 couples to the load at mesh order
+    assert pts["coupling"].iloc[1] < 1e-6 and not pts["symmetry_broken"].iloc[1]
+    assert pts["symmetry_broken"].iloc[2]
+    assert pts["stretch"].iloc[1] == pytest.approx(1.7725, abs=2e-3)
+    assert pts["stretch"].iloc[2] == pytest.approx(2.9152, abs=0.1)
+
+
+def test_plate_under_voltage_has_no_limit_point():
+    scene = get_spec("plate").build(("voltage",), nodes=31)
+    branch = trace(scene, "voltage", until={"voltage": 1.2})
+    assert np.all(np.diff(branch.table["voltage"]) >= 0)            # the voltage only rises
+    assert len(branch.points) >= 1 and (branch.points["kind"] != "LP").all()
+
+
+def _shape_deviation(branch, p):
+    q = branch.scene_state(p)
+    r, z = q[0::2], q[1::2]
+    rho = np.hypot(r, z - 0.5 * (z[0] + z[-1]))
+    return (rho.max() - rho.min()) / rho.mean()
+
+
+def test_switching_at_the_pear_bp_lands_on_a_non_spherical_branch(e_balloon, tmp_path):
+    diagram = e_balloon.switch(2, until={"stretch_max": 3.5})
+    assert isinstance(diagram, Diagram) and len(diagram.branches) == 3
+    p_bp = e_balloon.points["pressure"].iloc[2]
+    uniform = max(_shape_deviation(e_balloon, p) for p in e_balloon.states if p.s < e_balloon.points["s"].iloc[2])
+    deviations = []
+    for child in diagram.branches[1:]:
+        assert child.states[0].lam == pytest.approx(p_bp, rel=0.05)
+        for p in child.states:
+            q = child.scene_state(p)
+            residual = child.scene.evaluate(q, {**child.scene.loads, "pressure": p.lam}, 1).residual
+            assert np.max(np.abs(residual)) < 1e-8 * child.scene.force_scale
+        deviations.append(max(_shape_deviation(child, p) for p in child.states))
+    assert max(deviations) > 10 * uniform                     # a pear, far beyond the mesh's error
+    diagram.save(tmp_path / "d.csv")
+    back = read_diagram(tmp_path / "d.csv")
+    assert sorted(back.table["branch"].unique()) == [0, 1, 2]
+    assert [(c.parent, c.row, c.child) for c in back.connections] == [(0, 2, 1), (0, 2, 2)]
+    assert np.allclose(back.states["b1_lam"], [p.lam for p in diagram.branches[1].states])
+
+
+def test_switching_at_the_p1_pitchfork_gives_mirror_halves(e_balloon):
+    diagram = e_balloon.switch(1, until={"stretch_max": 2.2})
+    (plus, minus) = diagram.branches[1:]
+    a, b, c = (plus.stats["switch"][k] for k in "abc")
+    assert abs(a) < 1e-5 * (abs(b) + abs(c))                 # a pitchfork: phi . D2F[u, u] = 0 by symmetry
+    for half in (plus, minus):
+        assert half.states[0].lam == pytest.approx(e_balloon.points["pressure"].iloc[1], rel=1e-3)
+    # the mirror image (reflection + translation) of one half is the other: same pressures at the end
+    assert plus.table["pressure"].iloc[-1] == pytest.approx(minus.table["pressure"].iloc[-1], rel=1e-6)
+    assert max(_shape_deviation(plus, p) for p in plus.states) > 1e-2
