@@ -148,19 +148,10 @@ def _balloon(params, with_loads):
                           probes={"stretch": lambda q: float(q[0::2].max() / R)})
 
 
-#: Cross-section radius of the validation torus [m] when neither Rs nor aspect_ratio is set.
-TORUS_RS = 2.0
-
-
 def _torus(params, with_loads):
     Rb, Rs = params["Rb"], params["Rs"]
-    if params["aspect_ratio"] is not None:
-        if Rs is not None:
-            raise SnapmemError(f"Rs = {Rs:g} and aspect_ratio = {params['aspect_ratio']:g}: set one of them, not both")
-        Rs = params["aspect_ratio"] * Rb
-    elif Rs is None:
-        Rs = TORUS_RS
-    params["Rs"] = Rs
+    if params["aspect_ratio"] is not None:          # Rs is then not given (its Parameter excludes it)
+        Rs = params["Rs"] = params["aspect_ratio"] * Rb
     if Rs >= Rb:
         raise SnapmemError(f"Rs = {Rs:g}: must be < Rb = {Rb:g} (the cross-section may not reach the axis)")
     meridian = torus(Rb, Rs, params["nodes"])
@@ -186,9 +177,8 @@ register(SceneSpec(
     "torus", "toroidal membrane, circle of radius Rs about (Rb, 0) (paper Figs 3f, 5)",
     common_parameters(100, H=0.1)
     + (Parameter("Rb", 10.0, "m", "axis to the centre of the cross-section", minimum=0.0, open_min=True),
-       Parameter("Rs", None, "m", f"cross-section radius (< Rb; default {TORUS_RS:g}, or aspect_ratio * Rb)",
-                 minimum=0.0, open_min=True),
+       Parameter("Rs", 2.0, "m", "cross-section radius (< Rb)", minimum=0.0, open_min=True),
        Parameter("aspect_ratio", None, "", "Rs / Rb instead of Rs: Rs = aspect_ratio * Rb", minimum=0.0,
-                 maximum=1.0, open_min=True, open_max=True))
+                 maximum=1.0, open_min=True, open_max=True, excludes=("Rs",)))
     + material_parameters(),
     _torus))

@@ -98,6 +98,9 @@ class Parameter:
         Allowed values of a string parameter.
     note : callable (value) -> str, optional
         Says why a value out of range is refused (appended to the message).
+    excludes : tuple of str, optional
+        Parameters that may not be set together with this one (they give the same thing another
+        way, e.g. aspect_ratio and Rs); setting both is refused, not resolved by order.
 
     Every real value must also have a magnitude within :data:`MAGNITUDE` (or be 0).
     """
@@ -113,6 +116,7 @@ class Parameter:
     open_max: bool = False
     choices: tuple = ()
     note: object = None
+    excludes: tuple = ()
 
     def check(self, value, parse_text: bool = True):
         """The value converted to ``kind``, or SnapmemError naming this parameter, the value and
