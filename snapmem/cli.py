@@ -131,7 +131,8 @@ def cmd_trace(args) -> int:
     check_memory(f"trace {scene.name}", scene.meridian.nodes, check_int("--max-steps", args.max_steps, minimum=1))
     until = parse_until(args.until) if args.until else {"stretch_max": 4.0}
     options = ContinuationOptions(max_steps=args.max_steps, stop_at_first_limit=args.stop_at_first_limit,
-                                  save_at=tuple(float(v) for v in args.save_at or ()))
+                                  save_at=tuple(check_real("--save-at", v, minimum=-1e30, maximum=1e30)
+                                                for v in args.save_at or ()))
     start = None
     if args.restart:
         saved = restart_file(args.restart, scene)
@@ -273,8 +274,8 @@ def cmd_simulate(args) -> int:
                                f"set {name} one way, not both")
     ex = experiment(args.scene, **params)
     changes = {k: v for k, v in (("scheme", args.scheme),
-                                 ("tol", None if args.tol is None else check_real("--tol", args.tol, minimum=0.0,
-                                                                                  min_inclusive=False)))
+                                 ("tol", None if args.tol is None else check_real("--tol", args.tol, minimum=1e-8,
+                                                                                  maximum=1.0)))
                if v is not None}
     dt_min = ex.options.dt_min
     t_end = check_real("--t-end" if args.t_end is not None else "t_end", ex.t_end if args.t_end is None else args.t_end,

@@ -36,8 +36,8 @@ def _dynamics_parameters(rho, xi, t_end, tol=1e-3):
     return (Parameter("rho", rho, "kg/m^3", "membrane density", minimum=0.0, open_min=True),
             Parameter("xi", xi, "1/s", "mass-proportional damping", minimum=0.0),
             Parameter("t_end", t_end, "s", "end of the simulation", minimum=0.0, open_min=True),
-            Parameter("tol", tol, "", "local time-error tolerance per step, fraction of the size",
-                      minimum=0.0, open_min=True))
+            Parameter("tol", tol, "", "local time-error tolerance per step, fraction of the size "
+                      "(1e-8 to 1: below, steps would shrink past dt_min)", minimum=1e-8, maximum=1.0))
 
 
 def _contact_parameters(kappa, dhat):
