@@ -331,7 +331,7 @@ def cmd_hysteresis(args) -> int:
     from snapmem.io.results import write_table
     params = parse_sets(args.set)
     scene = get_spec(args.scene).build(loads_needed(args.control), **params)
-    peak = None if args.peak is None else check_real("--peak", args.peak)
+    peak = None if args.peak is None else check_real("--peak", args.peak, minimum=-1e30, maximum=1e30)
     loop = hysteresis(scene, args.control, peak=peak)
     meta = {"command": "hysteresis", "scene": scene.name, "parameters": scene.parameters, "control": args.control,
             "status": loop.status}
