@@ -102,7 +102,9 @@ class Parameter:
         Parameters that may not be set together with this one (they give the same thing another
         way, e.g. aspect_ratio and Rs); setting both is refused, not resolved by order.
 
-    Every real value must also have a magnitude within :data:`MAGNITUDE` (or be 0).
+    Every real value must also have a magnitude at most ``MAGNITUDE[1]``, and a strictly positive
+    scale (``minimum=0, open_min=True``: a length, a modulus, a permittivity, which the model
+    divides by) at least ``MAGNITUDE[0]``.
     """
 
     name: str
@@ -145,9 +147,10 @@ class Parameter:
         except SnapmemError as exc:
             raise SnapmemError(f"{exc}{self.note(value) if self.note else ''}") from None
         low, high = MAGNITUDE
-        if value != 0.0 and not low <= abs(value) <= high:
+        scale = self.minimum == 0.0 and self.open_min          # a length, modulus, ...: the model divides by it
+        if abs(value) > high or (scale and value < low):
             raise SnapmemError(f"{self.name} = {value!r}: its magnitude must lie between {low:g} and {high:g} "
-                               f"(or be 0 where allowed) for the model's formulas to stay finite")
+                               f"{'' if scale else '(or below, down to 0) '}for the model's formulas to stay finite")
         return value
 
     def with_default(self, default) -> "Parameter":
