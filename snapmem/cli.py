@@ -18,12 +18,27 @@ from snapmem.catalog.loads import loads_needed
 from snapmem.catalog.scenes import SCENES, get_spec
 from snapmem.continuation import CONTROLS
 from snapmem.dynamics import SCHEMES
-from snapmem.errors import SnapmemError, SolverError
+from snapmem.errors import FIGURE_SUFFIXES, SnapmemError, SolverError, check_int, check_output, check_real, parse_number
 from snapmem.io.progress import Progress, bar
+from snapmem.model.parameters import check_memory
 from snapmem.sweeps.grid import parse_axis, parse_value
 
 #: The controls that move a load (fold curves and hysteresis loops; not volume).
 LOAD_CONTROLS = tuple(control for control in CONTROLS if control != "volume")
+
+
+def real(text: str) -> float:
+    """An option's value as a number, typed in ASCII decimal notation (argparse type; see
+    :func:`snapmem.errors.parse_number`)."""
+    return float(parse_number("value", text))
+
+
+def integer(text: str) -> int:
+    """An option's value as an integer in ASCII digits (argparse type)."""
+    value = parse_number("value", text)
+    if not isinstance(value, int):
+        raise ValueError(text)
+    return value
 
 
 class _Parser(argparse.ArgumentParser):
@@ -38,8 +53,40 @@ def parse_sets(pairs: list[str]) -> dict:
         name, sep, value = pair.partition("=")
         if not sep or not name.strip() or not value.strip():
             raise SnapmemError(f"--set {pair!r}: must be NAME=VALUE, e.g. --set nodes=201")
+        if name.strip() in out:
+            raise SnapmemError(f"--set {name.strip()!r}: given twice ({out[name.strip()]!r} and {value.strip()!r}); "
+                               "give each parameter once")
         out[name.strip()] = value.strip()
     return out
+
+
+def merge_option(params: dict, name: str, value, option: str) -> dict:
+    """``params`` with ``name`` = ``value`` from its own ``option`` (if given); a ``--set`` of the
+    same parameter as well is a conflict, refused rather than resolved by order."""
+    if value is None:
+        return params
+    if name in params:
+        raise SnapmemError(f"--set {name}={params[name]} and {option} {value}: set {name} one way, not both")
+    return {**params, name: value}
+
+
+#: Output options of each command and the file endings they take (empty: any).
+OUTPUTS = {"trace": {"out": (), "points": (), "plot": FIGURE_SUFFIXES},
+           "fold": {"out": (), "plot": FIGURE_SUFFIXES},
+           "hysteresis": {"out": (), "plot": FIGURE_SUFFIXES},
+           "simulate": {"out": (".npz",)},
+           "replay": {"out": (".gif", ".mp4")},
+           "bench": {"out": ()},
+           "sweep": {"out": ()}}
+
+
+def check_outputs(args) -> None:
+    """Every output path of the command checked before any work (folder exists and is writable,
+    not a folder itself, the right ending), so that a run never fails only at its end."""
+    for option, suffixes in OUTPUTS.get(args.command, {}).items():
+        value = getattr(args, option, None)
+        if value is not None:
+            check_output(f"--{option}", value, suffixes)
 
 
 def cmd_scenes(args) -> int:
@@ -54,9 +101,7 @@ def cmd_scenes(args) -> int:
 
 def cmd_equilibrium(args) -> int:
     from snapmem.statics import equilibrium
-    params = parse_sets(args.set)
-    if args.pressure is not None:
-        params["pressure"] = args.pressure
+    params = merge_option(parse_sets(args.set), "pressure", args.pressure, "--pressure")
     scene = get_spec(args.scene).build(**params)
     eq = equilibrium(scene)
     for name, value in {"pressure": scene.resolve_loads(eq.loads)["pressure"], **eq.measures()}.items():
@@ -83,12 +128,14 @@ def cmd_trace(args) -> int:
     params = parse_sets(args.set)
     control = args.control
     scene = get_spec(args.scene).build(loads_needed(control), **params)
+    check_memory(f"trace {scene.name}", scene.meridian.nodes, check_int("--max-steps", args.max_steps, minimum=1))
     until = parse_until(args.until) if args.until else {"stretch_max": 4.0}
     options = ContinuationOptions(max_steps=args.max_steps, stop_at_first_limit=args.stop_at_first_limit,
-                                  save_at=tuple(float(v) for v in args.save_at or ()))
+                                  save_at=tuple(check_real("--save-at", v, minimum=-1e30, maximum=1e30)
+                                                for v in args.save_at or ()))
     start = None
     if args.restart:
-        saved = load_points(args.restart)
+        saved = restart_file(args.restart, scene)
         index = args.start_index
         if not -len(saved["lam"]) <= index < len(saved["lam"]):
             raise SnapmemError(f"--start-index {index}: the file has {len(saved['lam'])} points")
@@ -176,6 +223,36 @@ def _trace_switch(args, scene, control, until, options) -> int:
     return 0
 
 
+def restart_file(path, scene) -> dict:
+    """The arrays of a branch file for ``trace --restart``, checked against ``scene``: a control
+    snapmem knows, finite states of the scene's size (a file saved with another node count is
+    refused with both counts)."""
+    from snapmem.continuation import load_points
+    what = f"--restart {str(path)!r}"
+    try:
+        saved = load_points(path)
+    except SnapmemError:
+        raise
+    except (ValueError, TypeError) as exc:         # meta that is not JSON
+        raise SnapmemError(f"{what}: not a snapmem branch file ({exc})") from None
+    meta = saved["meta"]
+    if not isinstance(meta, dict) or meta.get("control") not in CONTROLS:
+        raise SnapmemError(f"{what}: its meta names no control ({', '.join(CONTROLS)}); not a snapmem branch file")
+    size = scene.reference_state().size
+    lam, q = np.asarray(saved["lam"]), np.asarray(saved.get("q", np.empty(0)))
+    if lam.ndim != 1 or lam.size == 0 or lam.dtype.kind not in "fiu":
+        raise SnapmemError(f"{what}: 'lam' must be a non-empty 1D array of numbers (shape {lam.shape})")
+    if q.ndim != 2 or q.shape[0] != lam.size or q.dtype.kind not in "fiu":
+        raise SnapmemError(f"{what}: 'q' must be {lam.size} states (shape {q.shape})")
+    if q.shape[1] != size:
+        nodes = scene.meridian.nodes
+        raise SnapmemError(f"{what}: saved with {q.shape[1] // 2} nodes; scene {scene.name!r} has {nodes} "
+                           f"(set --set nodes={q.shape[1] // 2}, or trace anew)")
+    if not (np.all(np.isfinite(lam)) and np.all(np.isfinite(q))):
+        raise SnapmemError(f"{what}: has non-finite states")
+    return saved
+
+
 def cmd_fold(args) -> int:
     from snapmem.continuation.folds import fold_curve
     from snapmem.io.results import write_table
@@ -198,21 +275,23 @@ def cmd_fold(args) -> int:
         from snapmem.viz.plotting import plot_xy
         plot_xy(table, name, f"{args.control}_limit", args.plot, title=f"{args.scene}: limit points")
     with pd.option_context("display.width", 200, "display.max_columns", 12):
-        print(table[[name, f"{args.control}_limit", "exists", "method", "iterations", "u_max"]].to_string(index=False))
+        shown = [c for c in (name, f"{args.control}_limit", "exists", "method", "iterations", "u_max", "status")
+                 if c in table.columns]
+        print(table[shown].to_string(index=False))
     return 0
 
 
 def cmd_sweep(args) -> int:
     from snapmem.sweeps.sweep import make_job, sweep
-    fixed = parse_sets(args.set)
-    if args.pressure is not None:
-        fixed["pressure"] = args.pressure
+    from snapmem.sweeps.grid import check_design_count
+    fixed = merge_option(parse_sets(args.set), "pressure", args.pressure, "--pressure")
     axes = {}
     for text in args.grid:
         name, values = parse_axis(text)
         if name in axes:
             raise SnapmemError(f"--grid {name!r}: given twice")
         axes[name] = values
+        check_design_count(axes)                     # at once, before the product is made
     job = make_job(args.job, args.scene, fixed, axes)
     workers, timeout = (None if text is None else parse_value(name, text, number=True)
                         for name, text in (("workers", args.workers), ("timeout", args.timeout)))
@@ -228,11 +307,24 @@ def cmd_simulate(args) -> int:
     from snapmem.catalog.robots import EXPERIMENTS, events, experiment
     from snapmem.dynamics.driver import simulate
     params = parse_sets(args.set)
+    if "name" in params:
+        raise SnapmemError(f"--set name={params['name']}: the scene is named by the command's scene argument "
+                           f"({args.scene!r}); leave name out")
+    for option, name in (("--t-end", "t_end"), ("--tol", "tol")):
+        if getattr(args, name) is not None and name in params:
+            raise SnapmemError(f"--set {name}={params[name]} and {option} {getattr(args, name)}: "
+                               f"set {name} one way, not both")
     ex = experiment(args.scene, **params)
-    t_end = ex.t_end if args.t_end is None else float(args.t_end)
-    changes = {k: v for k, v in (("scheme", args.scheme), ("tol", args.tol)) if v is not None}
-    if args.frames:
-        changes["save_interval"] = t_end / args.frames
+    changes = {k: v for k, v in (("scheme", args.scheme),
+                                 ("tol", None if args.tol is None else check_real("--tol", args.tol, minimum=1e-8,
+                                                                                  maximum=1.0)))
+               if v is not None}
+    dt_min = ex.options.dt_min
+    t_end = check_real("--t-end" if args.t_end is not None else "t_end", ex.t_end if args.t_end is None else args.t_end,
+                       minimum=dt_min, maximum=1e9)
+    frames = check_int("--frames", args.frames, minimum=0, maximum=10_000_000)
+    if frames:
+        changes["save_interval"] = t_end / frames
     options = dataclasses.replace(ex.options, **changes)
     display = Progress(enabled=not args.quiet)
 
@@ -256,7 +348,7 @@ def cmd_simulate(args) -> int:
     for key in traj.data:
         if key.endswith(("_force", "_z")):
             lines[f"final_{key}"] = float(traj[key][-1])
-    if args.scene in EXPERIMENTS and meta["status"] == "completed":
+    if args.scene in EXPERIMENTS and meta["status"] == "completed" and len(traj["t"]) >= 2:
         lines.update({f"event_{k}": v for k, v in events(traj).items()})     # snap times, ball heights, ...
     for name, value in lines.items():
         print(f"{name}: {value:.6g}" if isinstance(value, float) else f"{name}: {value}")
@@ -268,8 +360,10 @@ def cmd_simulate(args) -> int:
 def cmd_replay(args) -> int:
     from snapmem.dynamics.driver import Trajectory
     from snapmem.viz.replay import animate
+    frames = check_int("--frames", args.frames, minimum=1, maximum=100_000)
+    fps = check_int("--fps", args.fps, minimum=1, maximum=1000)
     traj = Trajectory.load(args.trajectory)
-    out = animate(traj, args.out, frames=args.frames, fps=args.fps)
+    out = animate(traj, args.out, frames=frames, fps=fps)
     print(f"wrote: {out}")
     return 0
 
@@ -279,7 +373,8 @@ def cmd_hysteresis(args) -> int:
     from snapmem.io.results import write_table
     params = parse_sets(args.set)
     scene = get_spec(args.scene).build(loads_needed(args.control), **params)
-    loop = hysteresis(scene, args.control, peak=args.peak)
+    peak = None if args.peak is None else check_real("--peak", args.peak, minimum=-1e30, maximum=1e30)
+    loop = hysteresis(scene, args.control, peak=peak)
     meta = {"command": "hysteresis", "scene": scene.name, "parameters": scene.parameters, "control": args.control,
             "status": loop.status}
     if args.out:
@@ -347,12 +442,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--points", metavar="POINTS.csv", help="critical points table")
     p.add_argument("--plot", metavar="FIG.png", help="plot of the branch")
     p.add_argument("--x", help="column on the plot's x axis (default: the scene's first probe or u_max)")
-    p.add_argument("--save-at", type=float, action="append", metavar="VALUE",
+    p.add_argument("--save-at", type=real, action="append", metavar="VALUE",
                    help="locate a point exactly at this control value (repeatable)")
     p.add_argument("--stop-at-first-limit", action="store_true")
-    p.add_argument("--max-steps", type=int, default=2000)
+    p.add_argument("--max-steps", type=integer, default=2000)
     p.add_argument("--restart", metavar="BRANCH.npz", help="start from a point saved by an earlier trace")
-    p.add_argument("--start-index", type=int, default=-1, help="which saved point to restart from (default last)")
+    p.add_argument("--start-index", type=integer, default=-1, help="which saved point to restart from (default last)")
     p.add_argument("--switch", metavar="BRANCH.npz:K", help="switch at the BP in row K of the points table of a "
                    "branch saved by trace --out and trace the new branch both ways (--out writes the diagram)")
     p.set_defaults(func=cmd_trace)
@@ -371,7 +466,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene")
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
     p.add_argument("--control", choices=LOAD_CONTROLS, default="pressure")
-    p.add_argument("--peak", type=float, help="control value reached after the snap (default 1.05 x the limit)")
+    p.add_argument("--peak", type=real, help="control value reached after the snap (default 1.05 x the limit)")
     p.add_argument("--out", metavar="LOOP.csv", help="the loop's branches (+ LOOP_snaps.csv)")
     p.add_argument("--plot", metavar="FIG.png")
     p.set_defaults(func=cmd_hysteresis)
@@ -384,10 +479,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="simulate a scene in time with its schedule (dynamics, contact)")
     p.add_argument("scene")
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
-    p.add_argument("--t-end", type=float, help="end time [s] (default: the scene's)")
+    p.add_argument("--t-end", type=real, help="end time [s] (default: the scene's)")
     p.add_argument("--scheme", choices=SCHEMES, help="time integrator")
-    p.add_argument("--tol", type=float, help="local error tolerance per step (fraction of the size)")
-    p.add_argument("--frames", type=int, default=0, help="save about this many frames (default: every step)")
+    p.add_argument("--tol", type=real, help="local error tolerance per step (fraction of the size)")
+    p.add_argument("--frames", type=integer, default=0, help="save about this many frames (default: every step)")
     p.add_argument("--out", metavar="TRAJ.npz", help="save the trajectory (compressed, no pickle)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_simulate)
@@ -395,9 +490,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="animate a saved trajectory to .gif or .mp4")
     p.add_argument("trajectory", metavar="TRAJ.npz")
     p.add_argument("--out", required=True, metavar="FILE.gif|FILE.mp4")
-    p.add_argument("--frames", type=int, default=120)
-    p.add_argument("--fps", type=int, default=20)
+    p.add_argument("--frames", type=integer, default=120)
+    p.add_argument("--fps", type=integer, default=20)
     p.set_defaults(func=cmd_replay)
+    for command in sub.choices.values():            # --debug and -v also after the command's name
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks")
+        command.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
+                             help="log solver progress")
     return parser
 
 
@@ -406,6 +505,7 @@ def main(argv=None) -> int:
     debug = "--debug" in argv
     try:
         args = build_parser().parse_args(argv)
+        check_outputs(args)
         logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                             format="%(levelname)s %(name)s: %(message)s")
         return args.func(args)

@@ -7,7 +7,10 @@ typed it (in Python, on the command line or in a spreadsheet) can fix it without
 from __future__ import annotations
 
 import math
+import os
+import re
 from numbers import Real
+from pathlib import Path
 
 
 class SnapmemError(ValueError):
@@ -96,6 +99,65 @@ def read_npz(path, what: str, required: tuple = ()) -> dict:
     for key in required:
         if key not in out:
             raise SnapmemError(f"{what} {str(path)!r}: has no {key!r} array; not a snapmem {what.split()[0]}")
+    return out
+
+
+#: A number as typed: ASCII digits, an optional sign, point and exponent, or inf / nan (so '1_0',
+#: full-width digits '１２' and other spellings Python's int() and float() accept are refused).
+_NUMBER_TEXT = re.compile(r"[+-]?((\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|inf|infinity|nan)", re.IGNORECASE)
+_INT_TEXT = re.compile(r"[+-]?\d+")
+
+
+def parse_number(name: str, text: str):
+    """``text`` as an int (plain digits) or a float, or SnapmemError naming ``name``.
+
+    Only ASCII decimal notation is a number ('12', '-0.5', '1e-3', 'inf', 'nan'); what Python
+    would also read ('1_0', '１２', ' 0x1') is refused, so that a typo is not taken for a value.
+    """
+    text = str(text).strip()
+    if not _NUMBER_TEXT.fullmatch(text) or not text.isascii():
+        raise SnapmemError(f"{name} = {text!r}: must be a number")
+    return int(text) if _INT_TEXT.fullmatch(text) else float(text)
+
+
+#: File name endings matplotlib can write a figure to.
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".eps", ".ps", ".tif", ".tiff", ".webp")
+
+
+def check_output(option: str, path, suffixes: tuple = ()) -> Path:
+    """``path`` as a Path a file can be written to, checked before any work is done.
+
+    Parameters
+    ----------
+    option : str
+        The option or argument the path came from (named in the message, e.g. '--out').
+    path : str or Path
+    suffixes : tuple of str, optional
+        Allowed endings (lower case, with the dot); empty: any.
+
+    Raises
+    ------
+    SnapmemError
+        The path is empty, is a folder, has another ending, its folder does not exist or is not
+        writable, or the file exists and is not writable.
+    """
+    text = str(path)
+    if not text.strip():
+        raise SnapmemError(f"{option} = {text!r}: must be a file name")
+    out = Path(text)
+    if suffixes and out.suffix.lower() not in suffixes:
+        raise SnapmemError(f"{option} = {text!r}: must end in {', '.join(suffixes)}")
+    if out.is_dir():
+        raise SnapmemError(f"{option} = {text!r}: is a folder; give a file name in it")
+    folder = out.parent
+    if not folder.exists():
+        raise SnapmemError(f"{option} = {text!r}: folder {str(folder)!r} does not exist")
+    if not folder.is_dir():
+        raise SnapmemError(f"{option} = {text!r}: {str(folder)!r} is not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise SnapmemError(f"{option} = {text!r}: folder {str(folder)!r} is not writable")
+    if out.exists() and not os.access(out, os.W_OK):
+        raise SnapmemError(f"{option} = {text!r}: the file exists and is not writable")
     return out
 
 

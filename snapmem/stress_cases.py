@@ -137,7 +137,18 @@ def no_equilibrium(d):
 
 def contact(d):
     """Gripper around a rod at 2000 Pa (past the free limit near 1750 Pa: the rod stops the snap),
-    barrier width dhat = fraction x rod radius, down to 1e-7, and contact stiffness kappa."""
+    barrier width dhat = fraction x rod radius, down to 1e-7, and contact stiffness kappa.
+
+    Barriers of 1e-5 of the rod and thinner switch on inside one step of the snap-through trace;
+    :func:`snapmem.statics.equilibrium` then continues the barrier width down from a wider one
+    (:func:`snapmem.statics.barrier_homotopy`), and the rod force converges to 273.7 N.
+
+    One case fails clearly for a numerical reason: kappa = 1e9 Pa with dhat = 4e-9 m. The
+    barrier's stiffness there, about kappa A / dhat ~ 1e9 Pa x 1e-3 m^2 / 4e-9 m ~ 2.5e14 N/m,
+    times the round-off of a node's radius (2.2e-16 x 0.04 m ~ 1e-17 m) is a force noise of
+    about 2e-3 N, above Newton's residual tolerance, so no double-precision state meets it (the
+    continuation reaches dhat ~ 1.2e-8 m before it stalls).
+    """
     from snapmem.model.contact import contact_report
     Rw = 0.04
     scene = build_scene("gripper_rod", Rw=Rw, dhat=d["dhat_fraction"] * Rw, kappa=d["kappa"], pressure=2000.0)

@@ -16,12 +16,14 @@ from snapmem.catalog.registry import Parameter, SceneSpec, register
 from snapmem.errors import SnapmemError
 from snapmem.model.materials import LAWS, Law, law_class, law_name
 from snapmem.model.meridian import Meridian, disc, sphere, torus
+from snapmem.model.parameters import MAX_NODES, nodes_note
 from snapmem.model.scene import Scene
 from snapmem.model.terms import Electric, PressureWork, Stretching
 
 def common_parameters(nodes: int, H=None) -> tuple:
     """``nodes`` and the reference thickness ``H`` [m] (None: set by the scene's defaults)."""
-    return (Parameter("nodes", nodes, "", "number of meridian nodes", int, minimum=3),
+    return (Parameter("nodes", nodes, "", "number of meridian nodes", int, minimum=3, maximum=MAX_NODES,
+                      note=nodes_note),
             Parameter("H", H, "m", "reference thickness", minimum=0.0, open_min=True))
 
 
@@ -148,7 +150,7 @@ def _balloon(params, with_loads):
 
 def _torus(params, with_loads):
     Rb, Rs = params["Rb"], params["Rs"]
-    if params["aspect_ratio"] is not None:
+    if params["aspect_ratio"] is not None:          # Rs is then not given (its Parameter excludes it)
         Rs = params["Rs"] = params["aspect_ratio"] * Rb
     if Rs >= Rb:
         raise SnapmemError(f"Rs = {Rs:g}: must be < Rb = {Rb:g} (the cross-section may not reach the axis)")
@@ -176,7 +178,7 @@ register(SceneSpec(
     common_parameters(100, H=0.1)
     + (Parameter("Rb", 10.0, "m", "axis to the centre of the cross-section", minimum=0.0, open_min=True),
        Parameter("Rs", 2.0, "m", "cross-section radius (< Rb)", minimum=0.0, open_min=True),
-       Parameter("aspect_ratio", None, "", "Rs / Rb; if set, Rs = aspect_ratio * Rb", minimum=0.0,
-                 maximum=1.0, open_min=True, open_max=True))
+       Parameter("aspect_ratio", None, "", "Rs / Rb instead of Rs: Rs = aspect_ratio * Rb", minimum=0.0,
+                 maximum=1.0, open_min=True, open_max=True, excludes=("Rs",)))
     + material_parameters(),
     _torus))

@@ -95,6 +95,11 @@ class SceneSpec:
                                    "set its parameters there")
             raise SnapmemError(f"parameter {key!r}: scene {self.name!r} has no such parameter; "
                                f"it has {', '.join(p.name for p in self.parameters)}")
+        for name, p in known.items():
+            for other in p.excludes:
+                if name in values and other in values:
+                    raise SnapmemError(f"{other} = {values[other]} and {name} = {values[name]}: "
+                                       "set one of them, not both")
         return {name: material if name == "material" else p.check(values.get(name, p.default))
                 for name, p in known.items()}
 

@@ -36,8 +36,8 @@ def _dynamics_parameters(rho, xi, t_end, tol=1e-3):
     return (Parameter("rho", rho, "kg/m^3", "membrane density", minimum=0.0, open_min=True),
             Parameter("xi", xi, "1/s", "mass-proportional damping", minimum=0.0),
             Parameter("t_end", t_end, "s", "end of the simulation", minimum=0.0, open_min=True),
-            Parameter("tol", tol, "", "local time-error tolerance per step, fraction of the size",
-                      minimum=0.0, open_min=True))
+            Parameter("tol", tol, "", "local time-error tolerance per step, fraction of the size "
+                      "(1e-8 to 1: below, steps would shrink past dt_min)", minimum=1e-8, maximum=1.0))
 
 
 def _contact_parameters(kappa, dhat):
@@ -49,6 +49,11 @@ def _contact_parameters(kappa, dhat):
 # pump
 def _pump(params, with_loads):
     """The validation plate's scene (rim clamped, Hencky start guess for continuation) named pump."""
+    times = [(name, params[name]) for name in ("t_up", "t_hold", "t_down")]
+    for (early, t0), (late, t1) in zip(times, times[1:]):
+        if t1 < t0:
+            raise SnapmemError(f"{late} = {t1:g} s: the pump's schedule needs t_up <= t_hold <= t_down "
+                               f"({early} = {t0:g} s)")
     scene = build_plate(params, tuple(with_loads) + ("voltage",))
     scene.name = "pump"
     return scene
@@ -126,7 +131,7 @@ def _ball_scene(params, with_loads):
 def _ball_parameters(name, t_end, drop, damp_ball):
     return (common_parameters(61, H=1e-4)
             + (Parameter("R", 0.1, "m", "balloon radius", minimum=0.0, open_min=True),
-               Parameter("name", name, "", "scene name", str))
+               Parameter("name", name, "", "scene name", str, choices=("ball_drop", "ball_throw")))
             + with_defaults(material_parameters(eps=EPS), mu=MU_MR, pressure=500.0)
             + _contact_parameters(1e4, 1e-3)
             + (Parameter("rb", 0.05, "m", "ball radius", minimum=0.0, open_min=True),

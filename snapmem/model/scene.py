@@ -18,7 +18,7 @@ import numpy as np
 
 from snapmem.kernels.banded import BandedMatrix
 from snapmem.kernels.bordered import BodyMatrix
-from snapmem.errors import SnapmemError, check_real
+from snapmem.errors import SnapmemError, check_int, check_real
 from snapmem.kernels.assembly import (edge_assembly, radius_max_step, residual_floor, scatter_add, state_check,
                                      volume_gradient)
 from snapmem.kernels.switch import compiled
@@ -103,7 +103,9 @@ class Scene:
         self.bodies = tuple(b for t in self.node_terms for b in t.bodies)
         self.n_node_dofs = 2 * meridian.nodes
         n_dof = self.n_node_dofs + len(self.bodies)
-        self.fixed = tuple(sorted({int(d) for d in fixed}))
+        if isinstance(fixed, (str, bytes)) or not isinstance(fixed, Iterable):
+            raise SnapmemError(f"fixed = {fixed!r}: must be a list of degree-of-freedom numbers")
+        self.fixed = tuple(sorted({check_int(f"fixed[{i}]", d, minimum=0) for i, d in enumerate(fixed)}))
         if any(d < 0 or d >= n_dof for d in self.fixed):
             raise SnapmemError(f"fixed = {list(self.fixed)}: degrees of freedom must lie in 0..{n_dof - 1}")
         self.name = name

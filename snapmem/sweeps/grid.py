@@ -17,6 +17,23 @@ from snapmem.errors import SnapmemError, check_int, check_real
 #: Column names a sweep writes itself, so no design parameter may take them.
 RESERVED = {"design", "key", "status", "message"}
 
+#: Most designs one sweep may have: each design is a row of the results table and a key in its
+#: journal (about 1 kB together), so 1e7 designs are about 10 GB before any is run.
+MAX_DESIGNS = 10_000_000
+
+
+def check_design_count(axes: Mapping[str, Sequence]) -> int:
+    """The number of designs of the axes' product, or SnapmemError (before the product is made)
+    when it exceeds :data:`MAX_DESIGNS`."""
+    count = 1
+    for values in axes.values():
+        count *= len(values)
+    if count > MAX_DESIGNS:
+        sizes = " x ".join(f"{len(v)} ({name})" for name, v in axes.items())
+        raise SnapmemError(f"grid: {sizes} = {count:.4g} designs; at most {MAX_DESIGNS:g} per sweep "
+                           "(split it into several sweeps)")
+    return count
+
 
 def product_grid(axes: Mapping[str, Sequence]) -> list[dict]:
     """Every combination of the axes' values, the last axis varying fastest.
@@ -29,6 +46,7 @@ def product_grid(axes: Mapping[str, Sequence]) -> list[dict]:
         values = axes[name]
         if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
             raise SnapmemError(f"grid axis {name!r} = {values!r}: must be a list of values")
+    check_design_count({name: list(axes[name]) for name in names})
     return [dict(zip(names, combo)) for combo in itertools.product(*(list(axes[n]) for n in names))]
 
 
@@ -116,7 +134,7 @@ def parse_axis(text: str, option: str = "--grid", number: bool = False):
         start, stop = (check_real(f"{name} {what}", parse_value(f"{name} {what}", p, number=True))
                        for what, p in zip(("START", "STOP"), parts[:2]))
         count = check_int(f"{name} COUNT", parse_value(f"{name} COUNT", parts[2], number=True), minimum=1,
-                          maximum=10_000_000)
+                          maximum=MAX_DESIGNS)
         return name, [float(v) for v in np.linspace(start, stop, count)]
     values = [v.strip() for v in spec.split(",")]
     if any(not v for v in values):

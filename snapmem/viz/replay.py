@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from snapmem.dynamics.driver import Trajectory
-from snapmem.errors import SnapmemError
+from snapmem.errors import SnapmemError, check_int
 
 log = logging.getLogger(__name__)
 
@@ -25,12 +25,42 @@ def frame_indices(t: np.ndarray, frames: int) -> np.ndarray:
     return np.unique(idx)
 
 
+def check_trajectory(traj: Trajectory) -> None:
+    """SnapmemError unless ``traj`` can be drawn: ``t`` (M,) finite and non-decreasing with M >= 1,
+    ``r`` and ``z`` (M, N) finite with N >= 2, and every time series drawn (loads, forces,
+    volume, ball height) finite of shape (M,). A file written by another program, or with empty,
+    NaN or mismatched arrays, is refused naming the array."""
+    data = traj.data
+    t = np.asarray(data["t"])
+    if t.dtype.kind not in "fiu" or t.ndim != 1 or t.size == 0:
+        raise SnapmemError(f"trajectory: 't' must be a non-empty 1D array of times (shape {t.shape}, dtype {t.dtype})")
+    arrays = {"t": (t.size,), "r": (t.size, None), "z": (t.size, None)}
+    arrays.update({k: (t.size,) for k in data if k.startswith("load_") or k.endswith("_force")
+                   or k in ("volume", "ball_z")})
+    for key, shape in arrays.items():
+        if key not in data:
+            continue
+        a = np.asarray(data[key])
+        if a.dtype.kind not in "fiu" or a.ndim != len(shape) or a.shape[0] != shape[0] or (
+                len(shape) == 2 and a.shape[1] < 2):
+            want = f"({t.size},)" if len(shape) == 1 else f"({t.size}, N >= 2)"
+            raise SnapmemError(f"trajectory: {key!r} has shape {a.shape} and dtype {a.dtype}; must be numbers "
+                               f"of shape {want} (one per time)")
+        if not np.all(np.isfinite(a)):
+            raise SnapmemError(f"trajectory: {key!r} has non-finite values (NaN or inf)")
+    if np.any(np.diff(t) < 0):
+        raise SnapmemError("trajectory: times 't' must not decrease")
+
+
 def animate(traj: Trajectory, out, frames: int = 120, fps: int = 20, dpi: int = 80) -> Path:
     """Write an animation of ``traj`` to ``out`` (.gif or .mp4); returns the path.
 
     Left: the meridian r >= 0 and its mirror image (the membrane's section through the axis),
     rigid bodies (rod, shell, plane, ball) drawn where the trajectory's scene put them. Right:
     loads, volume and contact forces against time, with a cursor.
+
+    The file is written to a temporary name beside ``out`` and renamed when complete, so an
+    error or an interrupt leaves no partial animation.
     """
     import matplotlib
     matplotlib.use("Agg")
@@ -40,6 +70,9 @@ def animate(traj: Trajectory, out, frames: int = 120, fps: int = 20, dpi: int = 
     out = Path(out)
     if out.suffix not in (".gif", ".mp4"):
         raise SnapmemError(f"--out {out}: must end in .gif or .mp4")
+    frames = check_int("frames", frames, minimum=1, maximum=100_000)
+    fps = check_int("fps", fps, minimum=1, maximum=1000)
+    check_trajectory(traj)
     t, r, z = traj["t"], traj["r"], traj["z"]
     closed = bool(traj.meta.get("closed", False))
     params = traj.meta.get("parameters", {}) or {}
@@ -101,8 +134,13 @@ def animate(traj: Trajectory, out, frames: int = 120, fps: int = 20, dpi: int = 
             plt.close(fig)
             raise SnapmemError(f"--out {out}: writing .mp4 needs ffmpeg, which is not installed; use .gif")
         writer = animation.FFMpegWriter(fps=fps)
-    anim.save(out, writer=writer, dpi=dpi)
-    plt.close(fig)
+    partial = out.with_name(f".{out.stem}.partial{out.suffix}")
+    try:
+        anim.save(partial, writer=writer, dpi=dpi)
+        partial.replace(out)
+    finally:
+        plt.close(fig)
+        partial.unlink(missing_ok=True)
     log.info("wrote %s (%d frames)", out, idx.size)
     return out
 
