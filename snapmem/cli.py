@@ -12,7 +12,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
+import snapmem._lazy as _lazy
+
+pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.catalog.loads import loads_needed
 from snapmem.catalog.scenes import SCENES, get_spec
