@@ -81,3 +81,22 @@ def test_t5_user_law_limit_point_by_hand(tmp_path):
 def test_t6_user_scene_equilibrium_stretch(tmp_path):
     stretch, lam = run("t6_own_scene", tmp_path)
     assert stretch == pytest.approx(lam, rel=2e-3)                # 41 nodes: 5e-4 off the thin sphere
+
+
+def test_docs_site_has_every_page_and_the_tutorials(tmp_path):
+    """``python docs/build.py`` (here without the pdoc API pages, which take 20 s): one HTML page
+    per Markdown page of docs/, the tutorials' index linking to their copied scripts."""
+    sys.path.insert(0, str(TUTORIALS.parent))
+    try:
+        spec = importlib.util.spec_from_file_location("docs_build", TUTORIALS.parent / "build.py")
+        build = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(build)
+    finally:
+        sys.path.remove(str(TUTORIALS.parent))
+    pytest.importorskip("markdown2", reason="the docs build needs snapmem[docs] (pdoc, markdown2)")
+    index = build.build(tmp_path / "site", api=False)
+    pages = build.pages()
+    assert index.exists() and len(list((tmp_path / "site").glob("*.html"))) == len(pages)
+    tutorials = (tmp_path / "site" / "tutorials_index.html").read_text()
+    assert all(f'href="tutorials/t{i}_' in tutorials for i in range(1, 7))
+    assert all((tmp_path / "site" / "tutorials" / f"{s.name}").exists() for s in TUTORIALS.glob("t[0-9]_*.py"))
