@@ -14,7 +14,11 @@ TUTORIALS = Path(__file__).resolve().parents[1] / "docs" / "tutorials"
 
 
 def run(name, tmp_path, *extra):
-    """Import the tutorial script ``name`` (its folder on sys.path, as when run) and call its main."""
+    """Import the tutorial script ``name`` (its folder on sys.path, as when run) and call its main;
+    the scenes and laws it registers are unregistered afterwards (other tests loop over all)."""
+    from snapmem.catalog.registry import SCENES
+    from snapmem.model.materials import LAWS
+    scenes, laws = dict(SCENES), dict(LAWS)
     sys.path.insert(0, str(TUTORIALS))
     try:
         spec = importlib.util.spec_from_file_location(f"tutorial_{name}", TUTORIALS / f"{name}.py")
@@ -23,6 +27,8 @@ def run(name, tmp_path, *extra):
         return module.main(["--quick", "--out", str(tmp_path), *extra])
     finally:
         sys.path.remove(str(TUTORIALS))
+        SCENES.clear(), SCENES.update(scenes)
+        LAWS.clear(), LAWS.update(laws)
 
 
 def test_every_tutorial_is_tested_and_indexed():
