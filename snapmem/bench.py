@@ -13,7 +13,9 @@ import os
 import time
 
 import numpy as np
-import pandas as pd
+import snapmem._lazy as _lazy
+
+pd = _lazy.module("pandas")  # imported at first use (start-up)
 from scipy.linalg.lapack import dgbsv
 
 from snapmem.continuation import fold_curve, trace

@@ -12,7 +12,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
+import snapmem._lazy as _lazy
+
+pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.catalog.loads import loads_needed
 from snapmem.catalog.scenes import SCENES, get_spec
@@ -402,6 +404,20 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_warmup(args) -> int:
+    from snapmem.warmup import warmup
+
+    def report(stage):
+        print(f"{stage.name}: {stage.seconds:.2f} s")
+        for each in stage.kernels:
+            print(f"  {each.kernel}: {each.seconds:.2f} s")
+        if not stage.kernels:
+            print("  nothing to compile (all in the cache)")
+    stages = warmup(everything=args.all, report=report)
+    print(f"warmup: {sum(s.seconds for s in stages):.2f} s, {sum(len(s.kernels) for s in stages)} kernels")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="snapmem", description="Snap-through of axisymmetric dielectric-elastomer membranes.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -493,6 +509,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=integer, default=120)
     p.add_argument("--fps", type=integer, default=20)
     p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("warmup", help="compile ahead the kernels of trace and simulate (once after install)")
+    p.add_argument("--all", action="store_true", help="also every robot experiment's kernels")
+    p.set_defaults(func=cmd_warmup)
+
     for command in sub.choices.values():            # --debug and -v also after the command's name
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks")
         command.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,

@@ -12,7 +12,9 @@ import time
 from pathlib import Path
 from typing import Callable, Iterable
 
-import pandas as pd
+import snapmem._lazy as _lazy
+
+pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.continuation.tracer import ContinuationOptions, trace
 from snapmem.io.results import write_table

@@ -6,7 +6,9 @@ from dataclasses import asdict
 from typing import Callable
 
 import numpy as np
-import pandas as pd
+import snapmem._lazy as _lazy
+
+pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.continuation.branch import PointKind
 from snapmem.continuation.locate import fold_newton

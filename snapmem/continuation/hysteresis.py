@@ -13,7 +13,9 @@ import logging
 import math
 from dataclasses import dataclass, replace
 
-import pandas as pd
+import snapmem._lazy as _lazy
+
+pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.continuation.tracer import ContinuationOptions, make_problem, trace
 from snapmem.errors import SnapmemError, check_real

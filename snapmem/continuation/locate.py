@@ -21,7 +21,9 @@ import logging
 import math
 
 import numpy as np
-from scipy.optimize import brentq
+import snapmem._lazy as _lazy
+
+brentq = _lazy.function("scipy.optimize", "brentq")     # scipy.optimize: imported at first use
 
 from snapmem.continuation.branch import Point, PointKind
 from snapmem.continuation.modes import legendre_mode

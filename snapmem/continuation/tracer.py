@@ -27,7 +27,9 @@ import math
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
-import pandas as pd
+import snapmem._lazy as _lazy
+
+pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.continuation.branch import Branch, Outcome, Point, PointKind
 from snapmem.continuation.events import Event, Step, events_from

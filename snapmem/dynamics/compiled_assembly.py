@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from snapmem._lazy import njit
 
 from snapmem.kernels.assembly import edge_assembly, edge_stretches, radius_max_step, residual_floor, state_check
 from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,

@@ -5,7 +5,7 @@ potential energy, volume, and each contact's normal force and smallest gap (what
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from snapmem._lazy import njit
 
 from snapmem.dynamics.compiled_assembly import assemble, contact_gaps
 from snapmem.kernels.assembly import swept_volume

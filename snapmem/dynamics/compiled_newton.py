@@ -9,7 +9,7 @@ A solve ends with one of the codes below; :data:`OUTCOMES` gives each its
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from snapmem._lazy import njit
 
 from snapmem.dynamics.compiled_assembly import admissible, assemble, max_step, state_ok
 from snapmem.kernels.bordered import bordered_solve

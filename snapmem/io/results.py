@@ -7,7 +7,9 @@ import os
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
+import snapmem._lazy as _lazy
+
+pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem._version import __version__
 

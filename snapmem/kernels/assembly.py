@@ -4,7 +4,7 @@ assembly, stretches, scatter, domain checks and the volume gradient. Arrays in, 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from snapmem._lazy import njit
 
 _EPS = np.finfo(np.float64).eps
 

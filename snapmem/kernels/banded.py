@@ -12,8 +12,11 @@ pivoting is used instead, on the general-band storage built for it.
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import eig_banded
-from scipy.linalg.lapack import dgbtrf, dgbtrs
+import snapmem._lazy as _lazy
+
+eig_banded = _lazy.function("scipy.linalg", "eig_banded")        # scipy.linalg: imported at first use
+dgbtrf = _lazy.function("scipy.linalg.lapack", "dgbtrf")
+dgbtrs = _lazy.function("scipy.linalg.lapack", "dgbtrs")
 
 from snapmem.kernels.linalg import (REFINE_ALWAYS, band_ldlt, band_ldlt_solve, band_matvec, needs_refinement,
                                    orthonormal, ritz_step)

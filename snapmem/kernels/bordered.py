@@ -16,8 +16,10 @@ for the compiled time step; its refinement policy is an argument, as :meth:`Body
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
-from scipy.linalg import eigh
+from snapmem._lazy import njit
+import snapmem._lazy as _lazy
+
+eigh = _lazy.function("scipy.linalg", "eigh")      # scipy.linalg: imported at first use
 
 from snapmem.kernels.banded import LDLT_GROWTH_LIMIT, BandedMatrix, BorderedMatrix
 from snapmem.kernels.linalg import _ldlt_solve_vector, band_ldlt, band_ldlt_solve, band_matvec, needs_refinement

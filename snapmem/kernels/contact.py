@@ -13,7 +13,7 @@ Compiled by numba on first use and cached on disk.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from snapmem._lazy import njit
 
 
 @njit(cache=True, nogil=True, inline="always")

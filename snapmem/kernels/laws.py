@@ -11,7 +11,7 @@ scalar formula, one branch in each of those two functions and the law's declarat
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from snapmem._lazy import njit
 
 from snapmem.kernels.assembly import invariant_chain, linear_law_density
 

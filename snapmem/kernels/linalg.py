@@ -15,7 +15,7 @@ both take.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from snapmem._lazy import njit
 
 
 @njit(cache=True, nogil=True)

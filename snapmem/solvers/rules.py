@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from snapmem._lazy import njit
 
 #: Armijo fraction: a step is accepted when the merit falls by this fraction of its linear model.
 ARMIJO = 1e-4

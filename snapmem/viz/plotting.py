@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-import pandas as pd
+import snapmem._lazy as _lazy
+
+pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 
 def _pyplot():
