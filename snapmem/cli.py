@@ -232,6 +232,16 @@ def cmd_replay(args) -> int:
     return 0
 
 
+def cmd_export(args) -> int:
+    from snapmem.viz.export import export
+    result = export(args.file, args.out, segments=args.segments, format=args.format)
+    bodies = ", ".join(f"{name} ({len(paths)} file{'s' if len(paths) > 1 else ''})"
+                       for name, paths in result.bodies.items()) or "none"
+    print(f"{result.kind}: {len(result.membrane)} surfaces, rigid bodies: {bodies}")
+    print(f"wrote: {result.pvd}")
+    return 0
+
+
 def cmd_hysteresis(args) -> int:
     from snapmem.continuation.hysteresis import hysteresis
     from snapmem.io.results import write_table
@@ -354,6 +364,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=120)
     p.add_argument("--fps", type=int, default=20)
     p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("export", help="3D surfaces for ParaView: a trajectory or branch as .vtu files and a .pvd")
+    p.add_argument("file", metavar="FILE.npz", help="from 'simulate --out' or 'trace --out'")
+    p.add_argument("--format", choices=("vtk",), default="vtk")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder for the files")
+    p.add_argument("--segments", type=int, default=64, help="angles the meridian is swept through (default 64)")
+    p.set_defaults(func=cmd_export)
     return parser
 
 
