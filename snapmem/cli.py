@@ -121,7 +121,7 @@ def cmd_trace(args) -> int:
         from snapmem.viz.plotting import plot_branch
         x = args.x or next(iter(scene.probes), "u_max")
         plot_branch(branch.table, x, control if control != "volume" else "pressure", path=args.plot,
-                    title=f"{scene.name}: {branch.status}")
+                    title=f"{scene.name}: {branch.status}", control=control, si=scene.mu != 1.0)
     print(f"status: {branch.status}")
     print(f"points: {len(branch.table)}  steps: {branch.stats['steps']}  rejected: {branch.stats['rejected']}  "
           f"newton_iterations: {branch.stats['newton_iterations']}")
@@ -154,7 +154,8 @@ def cmd_fold(args) -> int:
         write_table(table, args.out, meta)
     if args.plot:
         from snapmem.viz.plotting import plot_xy
-        plot_xy(table, name, f"{args.control}_limit", args.plot, title=f"{args.scene}: limit points")
+        plot_xy(table, name, f"{args.control}_limit", args.plot, title=f"{args.scene}: limit points",
+                si=spec.build(with_loads, **{**params, name: values[0]}).mu != 1.0)
     with pd.option_context("display.width", 200, "display.max_columns", 12):
         print(table[[name, f"{args.control}_limit", "exists", "method", "iterations", "u_max"]].to_string(index=False))
     return 0
@@ -257,7 +258,7 @@ def cmd_hysteresis(args) -> int:
         from snapmem.viz.plotting import plot_hysteresis
         x = next(iter(scene.probes), "u_max")
         plot_hysteresis(loop.table, loop.snaps, x, args.control, args.plot,
-                        title=f"{scene.name}: hysteresis ({loop.status})")
+                        title=f"{scene.name}: hysteresis ({loop.status})", si=scene.mu != 1.0)
     print(f"status: {loop.status}")
     for _, row in loop.snaps.iterrows():
         print(f"{row['event']}: at {args.control} = {row['control_at_limit']:.8g}, settled at "
