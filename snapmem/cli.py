@@ -172,7 +172,7 @@ def cmd_trace(args) -> int:
         from snapmem.viz.plotting import plot_branch
         x = args.x or next(iter(scene.probes), "u_max")
         plot_branch(branch.table, x, control if control != "volume" else "pressure", path=args.plot,
-                    title=f"{scene.name}: {branch.status}")
+                    title=f"{scene.name}: {branch.status}", control=control, si=scene.mu != 1.0)
     print(f"status: {branch.status}")
     print(f"points: {len(branch.table)}  steps: {branch.stats['steps']}  rejected: {branch.stats['rejected']}  "
           f"newton_iterations: {branch.stats['newton_iterations']}")
@@ -275,7 +275,8 @@ def cmd_fold(args) -> int:
         write_table(table, args.out, meta)
     if args.plot:
         from snapmem.viz.plotting import plot_xy
-        plot_xy(table, name, f"{args.control}_limit", args.plot, title=f"{args.scene}: limit points")
+        plot_xy(table, name, f"{args.control}_limit", args.plot, title=f"{args.scene}: limit points",
+                si=spec.build(with_loads, **{**params, name: values[0]}).mu != 1.0)
     with pd.option_context("display.width", 200, "display.max_columns", 12):
         shown = [c for c in (name, f"{args.control}_limit", "exists", "method", "iterations", "u_max", "status")
                  if c in table.columns]
@@ -370,6 +371,16 @@ def cmd_replay(args) -> int:
     return 0
 
 
+def cmd_export(args) -> int:
+    from snapmem.viz.export import export
+    result = export(args.file, args.out, segments=args.segments, format=args.format)
+    bodies = ", ".join(f"{name} ({len(paths)} file{'s' if len(paths) > 1 else ''})"
+                       for name, paths in result.bodies.items()) or "none"
+    print(f"{result.kind}: {len(result.membrane)} surfaces, rigid bodies: {bodies}")
+    print(f"wrote: {result.pvd}")
+    return 0
+
+
 def cmd_hysteresis(args) -> int:
     from snapmem.continuation.hysteresis import hysteresis
     from snapmem.io.results import write_table
@@ -386,7 +397,7 @@ def cmd_hysteresis(args) -> int:
         from snapmem.viz.plotting import plot_hysteresis
         x = next(iter(scene.probes), "u_max")
         plot_hysteresis(loop.table, loop.snaps, x, args.control, args.plot,
-                        title=f"{scene.name}: hysteresis ({loop.status})")
+                        title=f"{scene.name}: hysteresis ({loop.status})", si=scene.mu != 1.0)
     print(f"status: {loop.status}")
     for _, row in loop.snaps.iterrows():
         print(f"{row['event']}: at {args.control} = {row['control_at_limit']:.8g}, settled at "
@@ -513,6 +524,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("warmup", help="compile ahead the kernels of trace and simulate (once after install)")
     p.add_argument("--all", action="store_true", help="also every robot experiment's kernels")
     p.set_defaults(func=cmd_warmup)
+    p = sub.add_parser("export", help="3D surfaces for ParaView: a trajectory or branch as .vtu files and a .pvd")
+    p.add_argument("file", metavar="FILE.npz", help="from 'simulate --out' or 'trace --out'")
+    p.add_argument("--format", choices=("vtk",), default="vtk")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder for the files")
+    p.add_argument("--segments", type=integer, default=64, help="angles the meridian is swept through (default 64)")
+    p.set_defaults(func=cmd_export)
 
     for command in sub.choices.values():            # --debug and -v also after the command's name
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks")

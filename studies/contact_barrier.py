@@ -20,7 +20,7 @@ import time
 import pandas as pd
 
 from snapmem import build_scene
-from snapmem.viz.plotting import _pyplot
+from snapmem.viz import style
 from snapmem.catalog.robots import events, resting, run
 from snapmem.study import parse_args, save
 
@@ -61,22 +61,22 @@ def main(argv=None):
         table[f"{col}_rel"] = table[col] / finest[col] - 1.0
     save(args, "contact_barrier", table, nodes=nodes, t_drop=t_drop, t_grip=t_grip)
 
-    plt = _pyplot()
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
+    fig, axes = style.axes(size=(3.6, 3.2), ncols=3)
     for kappa, sub in table.groupby("kappa"):
-        label = f"kappa = {kappa:g} Pa (gripper x10)"
+        label = style.value_label("kappa", kappa) + " (gripper x10)"
         axes[0].plot(sub["dhat"], 100 * sub["rest_height_rel"], "o-", label=label)
         axes[1].plot(sub["dhat"], 100 * sub["gripper_force_rel"], "o-", label=label)
         axes[2].plot(sub["dhat"], sub["drop_newton"], "o-", label=label)
-    for ax, title in zip(axes, ("ball rest height [% from finest]", "gripper force on the rod [% from finest]",
-                                "ball_drop Newton iterations (first second)")):
-        ax.set_xscale("log")
-        ax.set_xlabel("ball dhat [m] (gripper: dhat / 2)")
-        ax.set_title(title, fontsize=9)
-    axes[0].legend(fontsize=7)
+    for ax, title, ylabel in zip(axes, ("ball at rest", "gripper on the rod", "ball_drop, first second"),
+                                 (r"$b_h$: change from the finest barrier [%]",
+                                  r"$F$: change from the finest barrier [%]", "Newton iterations")):
+        ax.set_xlabel(style.label("dhat") + " (gripper: $\\hat d/2$)")
+        ax.set_ylabel(ylabel)
+        ax.set_title(title)
+        style.log_axis(ax, "x")
+    style.legend(axes[2])
     fig.tight_layout()
-    fig.savefig(args.out / "contact_barrier.png", dpi=120)
-    plt.close(fig)
+    style.save(fig, args.out / "contact_barrier.png")
     return table
 
 

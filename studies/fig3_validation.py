@@ -32,7 +32,7 @@ def main(argv=None):
         lam = np.linspace(1, 4, 300)
         plot_branch(table, xs, "pressure", path=args.out / f"fig3_{name}.png", label="snapmem",
                     exact=(lam, exact.balloon_pressure(lam)) if name == "balloon" else None,
-                    title=f"Fig. 3: {name} (N = {nodes})")
+                    title=f"Fig. 3: {name}, N = {nodes}")
         out[name] = table
     return out
 

@@ -22,14 +22,14 @@ def main(argv=None):
     save(args, "fig4a_balloon_pressure", a, nodes=nodes)
     plot_family(a, "stretch", "pressure", "E_hat_value", args.out / "fig4a_balloon_pressure.png",
                 exact=lambda E: (lam[lam <= 4], exact.balloon_pressure(lam[lam <= 4], E_hat=E)),
-                title="Fig. 4a: balloon, p_hat against stretch (lines: exact)")
+                title="Fig. 4a: balloon under pressure")
     b = family(lambda p: build_scene("balloon", nodes=nodes, pressure=p, with_loads=("voltage",)),
                [9.5e-3, 10.7e-3, 11.8e-3, 13.0e-3, 14.2e-3], "p_hat", "E_hat", until={"stretch": 6.0})
     b["E_hat_exact"] = exact.balloon_e_hat(b["stretch"].to_numpy(), b["p_hat"].to_numpy())
     save(args, "fig4b_balloon_voltage", b, nodes=nodes)
     plot_family(b, "stretch", "E_hat", "p_hat", args.out / "fig4b_balloon_voltage.png",
                 exact=lambda p: (lam, exact.balloon_e_hat(lam, p)),
-                title="Fig. 4b: balloon, E_hat against stretch (lines: exact)")
+                title="Fig. 4b: balloon under voltage")
     return a, b
 
 

@@ -20,13 +20,13 @@ def main(argv=None):
     a["u_max_over_Rb"] = a["u_max"] / RB
     save(args, "fig5a_torus_pressure", a, nodes=nodes)
     plot_family(a, "u_max_over_Rb", "pressure", "E_hat_value", args.out / "fig5a_torus_pressure.png",
-                title="Fig. 5a: torus, p_hat against u_max / Rb")
+                title="Fig. 5a: torus under pressure")
     b = family(lambda p: build_scene("torus", nodes=nodes, pressure=p, with_loads=("voltage",)),
                [0.0260, 0.0284, 0.0308, 0.0331, 0.0355], "p_hat", "E_hat", until={"u_max": 10.0})
     b["u_max_over_Rb"] = b["u_max"] / RB
     save(args, "fig5b_torus_voltage", b, nodes=nodes)
     plot_family(b, "u_max_over_Rb", "E_hat", "p_hat", args.out / "fig5b_torus_voltage.png",
-                title="Fig. 5b: torus, E_hat against u_max / Rb")
+                title="Fig. 5b: torus under voltage")
     return a, b
 
 

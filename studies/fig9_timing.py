@@ -20,7 +20,11 @@ UNTIL = {"plate": {"deflection": 7.5}, "balloon": {"stretch": 4.0}, "torus": {"u
 
 
 def main(argv=None):
-    args = parse_args(__doc__, argv)
+    args = parse_args(__doc__, argv, extra=lambda p: p.add_argument(
+        "--redraw", action="store_true", help="only redraw the PNGs from the CSVs in --out"))
+    if args.redraw:
+        return draw(*(pd.read_csv(args.out / f"{name}.csv") for name in ("fig9a_static_cost", "fig9b_dynamic_cost")),
+                    args.out)
     sizes = [51, 101] if args.quick else [51, 101, 201, 401, 801]
     rows = []
     for name, until in UNTIL.items():
@@ -31,8 +35,6 @@ def main(argv=None):
                          "points": len(branch.table), "newton_iterations": branch.stats["newton_iterations"]})
     a = pd.DataFrame(rows)
     save(args, "fig9a_static_cost", a)
-    plot_xy(a, "nodes", "wall_time_s", args.out / "fig9a_static_cost.png", group="scene", logx=True, logy=True,
-            title="Fig. 9a: wall time of a traced curve")
     rows = []
     steps = [0.1, 0.05] if args.quick else [0.2, 0.1, 0.05, 0.02, 0.01]
     for scene, nodes in (("pump", 31 if args.quick else 61), ("torus_snap", 60 if args.quick else 200)):
@@ -44,8 +46,14 @@ def main(argv=None):
                          "steps": traj.meta.get("steps"), "status": traj.meta.get("status")})
     b = pd.DataFrame(rows)
     save(args, "fig9b_dynamic_cost", b)
-    plot_xy(b, "dt", "wall_time_s", args.out / "fig9b_dynamic_cost.png", group="scene", logx=True, logy=True,
-            title="Fig. 9b: wall time against the time step (implicit Euler)")
+    return draw(a, b, args.out)
+
+
+def draw(a, b, out):
+    plot_xy(a, "nodes", "wall_time_s", out / "fig9a_static_cost.png", group="scene", logx=True, logy=True,
+            title="Fig. 9a: wall time of a traced curve", legend_title="scene")
+    plot_xy(b, "dt", "wall_time_s", out / "fig9b_dynamic_cost.png", group="scene", logx=True, logy=True,
+            title="Fig. 9b: dynamics, implicit Euler", legend_title="scene")
     return a, b
 
 

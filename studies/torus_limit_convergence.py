@@ -32,7 +32,7 @@ def main(argv=None):
     t["error_vs_richardson"] = (t["p_limit"] - p_inf).abs() / p_inf
     save(args, "torus_limit_convergence", t, richardson_p_limit=p_inf)
     plot_xy(t, "nodes", "error_vs_richardson", args.out / "torus_limit_convergence.png", logx=True, logy=True,
-            title="Torus limit pressure: error against nodes")
+            title="Torus limit pressure: mesh convergence")
     print(t.to_string(index=False))
     return t
 

@@ -59,7 +59,7 @@ def main(argv=None):
     cols = ["aspect_ratio", "E_hat", "p_limit", "u_max_limit", "exists", "method", "iterations", "p_limit_traced"]
     save(args, "torus_limit_pressure_map", pm[cols + [c for c in pm.columns if c not in cols]], nodes=nodes)
     plot_xy(pm[pm["exists"]], "aspect_ratio", "p_limit", args.out / "torus_limit_pressure_map.png", group="E_hat",
-            title="Torus limit pressure against Rs/Rb (Fig. 5c)")
+            title="Fig. 5c: torus limit pressure")
 
     vm = limit_map(nodes, ratios, [0.0260, 0.0710] if args.quick else [0.0260, 0.0284, 0.0710, 0.0947], "E_hat", "pressure")
     vm = vm.rename(columns={"value": "aspect_ratio", "limit": "E_hat_limit", "u_max": "u_max_limit"})
@@ -68,7 +68,7 @@ def main(argv=None):
     cols = ["aspect_ratio", "pressure", "E_hat_limit", "u_max_limit", "exists", "method", "iterations", "E_hat_limit_traced"]
     save(args, "torus_limit_voltage_map", vm[cols + [c for c in vm.columns if c not in cols]], nodes=nodes)
     plot_xy(vm[vm["exists"]], "aspect_ratio", "E_hat_limit", args.out / "torus_limit_voltage_map.png", group="pressure",
-            title="Torus limit E_hat against Rs/Rb (Fig. 5d)")
+            title="Fig. 5d: torus limit field")
     return pm, vm
 
 
