@@ -32,13 +32,9 @@ def main(argv=None):
     if not args.quick:
         from snapmem.viz.replay import animate
         animate(traj, args.out / "torus_snap.gif", frames=60)
-    try:
-        from snapmem.io import vtk
-    except ImportError:
-        print("snapmem.io.vtk is not available (pip install 'snapmem[vtk]'): no 3D export")
-        return traj, snap, None
-    series = vtk.export(path, args.out / "torus_snap_vtk", segments=16 if args.quick else 64)
-    print(f"ParaView series: {series}")
+    from snapmem.viz.export import export       # needs meshio: pip install "snapmem[vtk]"
+    series = export(path, args.out / "torus_snap_vtk", segments=16 if args.quick else 64)
+    print(f"ParaView series: {series.pvd} ({len(series.membrane)} surfaces)")
     return traj, snap, series
 
 
