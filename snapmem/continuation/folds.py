@@ -174,7 +174,7 @@ def fold_special_points(scene_at: Callable[[float], Scene], values, folds: dict,
     if not folds:
         return pd.DataFrame(columns=columns), 0
     low, high = min(values), max(values)
-    v0, x0, lam0, phi0 = folds[min(folds, key=lambda v: list(values).index(v))]
+    v0, x0, lam0, phi0 = next(iter(folds.values()))          # the first one found
     found, iterations = [], 0
     for direction in (1, -1):
         try:
