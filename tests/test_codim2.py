@@ -111,7 +111,7 @@ def test_cli_fold_points_and_trace_sensitivity(tmp_path, capsys):
     import pandas as pd
     from snapmem.cli import main
     special = tmp_path / "special.csv"
-    assert main(["fold", "balloon", "--set", "material=gent", "--set", "nodes=31", "--vary", "Jlim=18:20:3",
+    assert main(["fold", "balloon", "--set", "material=gent", "--set", "nodes=31", "--vary", "Jlim=17.5,18,20",
                  "--points", str(special)]) == 0
     cusp = pd.read_csv(special)
     assert list(cusp["kind"]) == ["CP"] and cusp["Jlim"].iloc[0] == pytest.approx(exact.balloon_cusp_gent()[0], rel=1e-3)
