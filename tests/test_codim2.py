@@ -105,16 +105,23 @@ def test_limit_pressure_sensitivities():
     assert lp["dpressure_dc2"] == pytest.approx((limits[0] - limits[1]) / (2 * h), rel=1e-5)
 
 
-def test_cli_fold_points_and_trace_sensitivity(tmp_path, capsys):
-    """``snapmem fold balloon --set material=gent --vary Jlim=... --points`` writes the cusp with
-    a Jlim column; ``trace --sensitivity`` adds dpressure_d<param> columns."""
+@pytest.mark.slow
+def test_cli_fold_points(tmp_path):
+    """``snapmem fold balloon --set material=gent --vary Jlim=... --points`` writes the cusp with a
+    Jlim column (slow: below the cusp the fallback trace looks for a limit point up to the lock)."""
     import pandas as pd
     from snapmem.cli import main
     special = tmp_path / "special.csv"
-    assert main(["fold", "balloon", "--set", "material=gent", "--set", "nodes=31", "--vary", "Jlim=17.5,18,20",
+    assert main(["fold", "balloon", "--set", "material=gent", "--set", "nodes=21", "--vary", "Jlim=17.5,18,20",
                  "--points", str(special)]) == 0
     cusp = pd.read_csv(special)
     assert list(cusp["kind"]) == ["CP"] and cusp["Jlim"].iloc[0] == pytest.approx(exact.balloon_cusp_gent()[0], rel=1e-3)
+
+
+def test_cli_trace_sensitivity(tmp_path):
+    """``trace --sensitivity`` adds dpressure_d<param> columns; a count is refused (exit 2)."""
+    import pandas as pd
+    from snapmem.cli import main
     points = tmp_path / "points.csv"
     assert main(["trace", "balloon", "--set", "nodes=41", "--set", "E_hat=0.2", "--until", "stretch=1.7",
                  "--sensitivity", "E_hat,c2", "--points", str(points)]) == 0
