@@ -214,7 +214,7 @@ class LossOfEllipticity(Event):
         if hit is not None and hit[0] is point:
             return hit[1]
         q, loads = step.tracer.pb.state(point.x, point.lam)
-        state = local_state(step.tracer.scene, q, loads)
+        state = local_state(step.tracer.scene, q, loads, with_tension=False)     # tension: LossOfTension
         if len(self._cache) > 8:
             self._cache.clear()
         self._cache[id(point)] = (point, state)

@@ -102,15 +102,20 @@ class LocalState:
         return self.tension > 0.0
 
 
-def local_state(scene, q: np.ndarray, loads=None) -> LocalState | None:
+def local_state(scene, q: np.ndarray, loads=None, with_tension: bool = True) -> LocalState | None:
     """The ellipticity and tension checks of the scene's membrane at state q [m] under ``loads``
-    (resolved or None for the scene's); None if the scene has no membrane energy."""
+    (resolved or None for the scene's); None if the scene has no membrane energy.
+    ``with_tension``: False leaves the tension out (NaN; a trace has it among its measures)."""
     kin = scene.kinematics(q)
     dens = scene.density(kin, scene.resolve_loads(loads))
     if dens is None:
         return None
     margins = ellipticity_margins(kin.lam1, kin.lam2, dens, scene.mu)
-    t1, t2 = scene.tensions(q, loads)
-    tension = np.minimum(t1, t2)
-    ie, it = int(np.argmin(margins)), int(np.argmin(tension))
-    return LocalState(float(margins[ie]), ie, float(tension[it]), it, float(max(kin.lam1[ie], kin.lam2[ie])))
+    ie = int(np.argmin(margins))
+    tension, it = float("nan"), -1
+    if with_tension:
+        t1, t2 = scene.tensions(q, loads)
+        smallest = np.minimum(t1, t2)
+        it = int(np.argmin(smallest))
+        tension = float(smallest[it])
+    return LocalState(float(margins[ie]), ie, tension, it, float(max(kin.lam1[ie], kin.lam2[ie])))
