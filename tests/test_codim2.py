@@ -129,3 +129,23 @@ def test_cli_trace_sensitivity(tmp_path):
     assert table["dpressure_dE_hat"].iloc[0] == pytest.approx(exact.balloon_limit_sensitivity_e_hat(E_hat=0.2), rel=2e-3)
     assert "dpressure_dc2" in table
     assert main(["trace", "balloon", "--set", "nodes=41", "--sensitivity", "nodes"]) == 2
+
+
+def test_balloon_atlas_study_quick(tmp_path):
+    """studies/balloon_atlas.py --quick: every curve lies on the exact sphere's (LP curves to
+    2e-3, BP curves within the first-order mesh error at N = 31), and the cusp is located."""
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "studies" / "balloon_atlas.py"
+    spec = importlib.util.spec_from_file_location("balloon_atlas", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    table = module.main(["--quick", "--out", str(tmp_path)])
+    assert (tmp_path / "balloon_atlas.png").exists() and (tmp_path / "balloon_atlas.csv").exists()
+    rel = (table["pressure"] / table["pressure_exact"] - 1).abs()
+    lp = table["curve"].str.startswith("LP") & (table["plane"] == "E_hat")
+    assert rel[lp].max() < 2e-3                          # second order: 1.4e-3 at N = 31, 1.9e-4 at 81
+    bp = table["curve"].str.startswith("BP") & (table["v"] >= 0.37)     # off the P1 curve's vertical asymptote
+    assert (table["pressure"] - table["pressure_exact"])[bp].abs().max() < 5e-4      # 2.8e-4 at N = 31
+    cusp = table[table["kind"] == "CP"]
+    assert len(cusp) == 1 and cusp["v"].iloc[0] / 0.4375 == pytest.approx(exact.balloon_cusp_mooney_rivlin()[0], rel=2e-3)

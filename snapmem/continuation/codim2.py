@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -42,6 +42,10 @@ from snapmem.kernels.banded import BorderedMatrix
 from snapmem.model.scene import Scene
 
 log = logging.getLogger(__name__)
+
+#: smallest |phi_new . phi_old| of the unit null vectors at the two ends of an accepted step:
+#: below it the corrector has landed on another curve (two singular curves passing close)
+MODE_OVERLAP = 0.9
 
 
 @dataclass
@@ -152,6 +156,9 @@ class _System:
             arc = self.inner(t, y - y0) - ds
             if np.max(np.abs(F[:-1])) <= self.tol and abs(arc) <= 1e-12 and it > 0:
                 phi = w / np.linalg.norm(w)
+                if abs(phi @ base.phi) < MODE_OVERLAP:
+                    raise SolverError(f"the null vector turned (overlap {abs(phi @ base.phi):.2f}): "
+                                      "another singular curve")
                 point = SingularPoint(x, lam, v, phi, iterations=it)
                 point.tangent = self.tangent(blocks, t)
                 point.a = -float(blocks[2] @ phi) / np.linalg.norm(w) ** 2
@@ -167,8 +174,10 @@ class _System:
 
 def singular_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray, lam0: float, phi0: np.ndarray,
                    control: str = "pressure", v_range: tuple | None = None, direction: int = 1,
-                   ds: float = 0.05, ds_max: float = 0.2, max_steps: int = 200, v_scale: float | None = None,
-                   lam_range: tuple | None = None) -> SingularCurve:
+                   ds: float = 0.05, ds_max: float = 0.1, max_steps: int = 400, v_scale: float | None = None,
+                   lam_range: tuple | None = None,
+                   stop_when: Callable[[Scene, np.ndarray], str | None] | None = None,
+                   cusps: bool = True) -> SingularCurve:
     """Trace the curve of singular points (LPs or BPs) through (x0, lam0) at v0 in (x, lam, v).
 
     Parameters
@@ -190,6 +199,12 @@ def singular_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray
         Scale of v in the arclength (default |v0|, or 1).
     lam_range : (lam_min, lam_max), optional
         The curve stops where the control leaves it.
+    stop_when : callable, optional
+        (scene, q) -> None to go on, or why the curve stops at state q [m] of ``scene`` (e.g.
+        where the membrane loses ellipticity); the point is kept.
+    cusps : bool
+        Look for cusps (a curve of limit points); False for a curve of bifurcation points, whose
+        coefficient a need not mean a cusp (it vanishes by symmetry for a pitchfork).
 
     Returns
     -------
@@ -212,7 +227,7 @@ def singular_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray
     for _ in range(max_steps):
         base = points[-1]
         try:
-            p = system.correct(base, ds)
+            p = system.correct(base, ds, max_iterations=6)     # more: the step may land on a nearby curve
         except SolverError as exc:
             if ds <= 1e-6:
                 status = f"step too small after: {exc}"
@@ -220,7 +235,7 @@ def singular_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray
             ds *= 0.5
             continue
         p.s = base.s + ds
-        special.extend(_specials(system, base, p))
+        special.extend(_specials(system, base, p, cusps))
         points.append(p)
         if v_range is not None and not min(v_range) <= p.v <= max(v_range):
             status = "left the range of v"
@@ -228,14 +243,19 @@ def singular_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray
         if lam_range is not None and not min(lam_range) <= p.lam <= max(lam_range):
             status = "left the range of the control"
             break
+        why = None if stop_when is None else stop_when(system.problem(p.v).scene,
+                                                       system.problem(p.v).state(p.x, p.lam)[0])
+        if why is not None:
+            status = why
+            break
         ds = min(ds_max, ds * (1.5 if p.iterations <= 3 else 0.7))
     return _assemble(system, points, special, status)
 
 
-def _specials(system: _System, base: SingularPoint, p: SingularPoint) -> list:
+def _specials(system: _System, base: SingularPoint, p: SingularPoint, cusps: bool) -> list:
     """The cusps and turning points in v located between two points of the curve."""
     found = []
-    cusp = base.a * p.a < 0
+    cusp = cusps and base.a * p.a < 0
     turn = base.tangent[-1] * p.tangent[-1] < 0
     if cusp:
         found.append(_locate(system, base, p, lambda q: q.a, "CP"))
@@ -258,11 +278,22 @@ def _locate(system, base, p, f, kind):
         log.warning("could not locate %s point: %s", kind, exc)
         return None
     q = cache.get(s) or system.correct(base, s)
-    q.s, q.kind = base.s + s, kind
-    return q
+    return replace(q, s=base.s + s, kind=kind)          # a copy: q may be one of the curve's points
+
+
+def _distinct(special: list) -> list:
+    """The special points without repeats (one turning point can be bracketed on consecutive
+    steps where the curve runs nearly parallel to the v = const planes)."""
+    kept = []
+    for q in sorted(special, key=lambda q: q.s):
+        if not any(k.kind == q.kind and abs(k.v - q.v) <= 1e-4 * max(abs(q.v), 1.0)
+                   and abs(k.lam - q.lam) <= 1e-3 * max(abs(q.lam), 1e-300) for k in kept):
+            kept.append(q)
+    return kept
 
 
 def _assemble(system, points, special, status) -> SingularCurve:
+    special = _distinct(special)
     def row(q):
         pb = system.problem(q.v)
         return {"v": q.v, "lam": q.lam, "a": q.a, "s": q.s, "kind": q.kind, "iterations": q.iterations,
