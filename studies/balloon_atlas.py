@@ -10,6 +10,7 @@ Writes results/balloon_atlas.csv and results/balloon_atlas.png.
 """
 
 import numpy as np
+import pandas as pd
 
 from snapmem import build_scene
 from snapmem.continuation.atlas import Seed, stability_atlas
@@ -44,7 +45,7 @@ def main(argv=None):
                                     le_values=[0.45, 0.5, 0.55, 0.6] if not args.quick else [0.5], ds_max=step)
     c_plane, work_c = stability_atlas(lambda c2: build_scene("balloon", nodes=nodes, mu=1.0, c2=c2),
                                       [Seed("LP", 0.0625, ("stretch", 1.53))], (0.0625, 0.12), ds_max=step)
-    table = __import__("pandas").concat([e_plane.assign(plane="E_hat"), c_plane.assign(plane="c2")], ignore_index=True)
+    table = pd.concat([e_plane.assign(plane="E_hat"), c_plane.assign(plane="c2")], ignore_index=True)
     table["pressure_exact"] = [exact_pressure(row) for _, row in table.iterrows()]
     save(args, "balloon_atlas", table, nodes=nodes, newton_iterations=work["newton_iterations"] + work_c["newton_iterations"])
     draw(table, args.out / "balloon_atlas.png")

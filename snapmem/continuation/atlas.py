@@ -70,7 +70,7 @@ def stability_atlas(scene_at: Callable[[float], Scene], seeds: Sequence[Seed], v
     branches: dict = {}
     tables, iterations = [], 0
 
-    def elliptic(scene, q):
+    def invalid(scene, q):
         state = local_state(scene, q, with_tension=False)
         if state is not None and not state.elliptic:
             return "loss of ellipticity"
@@ -93,7 +93,7 @@ def stability_atlas(scene_at: Callable[[float], Scene], seeds: Sequence[Seed], v
         for direction in (1, -1):
             curve = singular_curve(scene_at, seed.value, start.x, start.lam, phi, control, v_range=v_range,
                                    direction=direction, v_scale=(max(v_range) - min(v_range)) or 1.0,
-                                   stop_when=elliptic, cusps=seed.kind == "LP", ds_max=ds_max)
+                                   stop_when=invalid, cusps=seed.kind == "LP", ds_max=ds_max)
             iterations += curve.newton_iterations
             t = curve.table.assign(curve=seed.name, direction=direction, status=curve.status)
             tables.append(t if direction == 1 else t.iloc[::-1])
