@@ -4,7 +4,8 @@ Every curve is a continuation in E_hat (snapmem.continuation.atlas): the pressur
 minimum (LP curves) from the branch at E_hat = 0, the P1 (pole held) and P2 bifurcation curves
 from the branch at E_hat = 0.4, each followed both ways until it leaves 0 <= E_hat <= 0.6, passes
 stretch 5 or loses ellipticity; loss-of-ellipticity points end branches traced at a few E_hat.
-A second panel follows the limit point in c2 (mu = 2 (c1 + c2) = 1 fixed) through its cusp.
+A second panel follows the limit point in c2 (mu = 2 (c1 + c2) = 1 fixed) through its cusp, a
+third the torus's limit point over its aspect ratio Rs/Rb (the same continuation).
 Exact values (MODEL.md section 7) sit beside every row: ``pressure_exact``.
 Writes results/balloon_atlas.csv and results/balloon_atlas.png.
 """
@@ -45,9 +46,15 @@ def main(argv=None):
                                     le_values=[0.45, 0.5, 0.55, 0.6] if not args.quick else [0.5], ds_max=step)
     c_plane, work_c = stability_atlas(lambda c2: build_scene("balloon", nodes=nodes, mu=1.0, c2=c2),
                                       [Seed("LP", 0.0625, ("stretch", 1.53))], (0.0625, 0.12), ds_max=step)
-    table = pd.concat([e_plane.assign(plane="E_hat"), c_plane.assign(plane="c2")], ignore_index=True)
-    table["pressure_exact"] = [exact_pressure(row) for _, row in table.iterrows()]
-    save(args, "balloon_atlas", table, nodes=nodes, newton_iterations=work["newton_iterations"] + work_c["newton_iterations"])
+    torus, work_t = stability_atlas(lambda a: build_scene("torus", nodes=2 * nodes // 3, aspect_ratio=a),
+                                    [Seed("LP", 0.2, ("u_max", 0.0))], (0.05, 0.9), until={"u_max": 6.0},
+                                    stretch_max=6.0, ds_max=2 * step)
+    table = pd.concat([e_plane.assign(plane="E_hat"), c_plane.assign(plane="c2"),
+                       torus.assign(plane="aspect_ratio")], ignore_index=True)
+    table["pressure_exact"] = [exact_pressure(row) if row["plane"] != "aspect_ratio" else np.nan
+                               for _, row in table.iterrows()]
+    save(args, "balloon_atlas", table, nodes=nodes,
+         newton_iterations=sum(w["newton_iterations"] for w in (work, work_c, work_t)))
     draw(table, args.out / "balloon_atlas.png")
     return table
 
@@ -57,7 +64,7 @@ def draw(table, path):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.4), gridspec_kw={"width_ratios": [1.6, 1]})
+    fig, (ax, bx, tx) = plt.subplots(1, 3, figsize=(15, 4.4), gridspec_kw={"width_ratios": [1.6, 1, 1]})
     e = table[table["plane"] == "E_hat"]
     styles = {"LP max": "C0", "LP min": "C4", "BP P1": "C1", "BP P2": "C2"}
     for name, colour in styles.items():
@@ -95,6 +102,14 @@ def draw(table, path):
     bx.set_ylabel(r"limit pressure $\hat p \times 10^3$")
     bx.set_title(r"LP curve through its cusp ($\hat E = 0$)")
     bx.legend(fontsize=8, loc="upper left")
+    torus = table[(table["plane"] == "aspect_ratio") & (table["kind"].fillna("") == "")]
+    for _, part in torus.groupby("direction"):
+        part = part.sort_values("v")
+        tx.plot(part["v"], 1e3 * part["pressure"], "-", color="C0", lw=1.8)
+    tx.set_yscale("log")
+    tx.set_xlabel(r"torus aspect ratio $R_s/R_b$")
+    tx.set_ylabel(r"limit pressure $\hat p \times 10^3$")
+    tx.set_title(r"torus counterpart: LP curve ($\hat E = 0$)")
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)

@@ -149,3 +149,6 @@ def test_balloon_atlas_study_quick(tmp_path):
     assert (table["pressure"] - table["pressure_exact"])[bp].abs().max() < 5e-4      # 2.8e-4 at N = 31
     cusp = table[table["kind"] == "CP"]
     assert len(cusp) == 1 and cusp["v"].iloc[0] / 0.4375 == pytest.approx(exact.balloon_cusp_mooney_rivlin()[0], rel=2e-3)
+    torus = table[(table["plane"] == "aspect_ratio") & (table["v"] == 0.2)]      # the seed of the torus curve
+    assert torus["lam"].iloc[0] == pytest.approx(0.040910, rel=0.02)              # converged limit (README)
+    assert table[table["plane"] == "aspect_ratio"]["v"].agg(["min", "max"]).tolist() == pytest.approx([0.05, 0.9], abs=0.05)
