@@ -161,6 +161,8 @@ def cmd_trace(args) -> int:
         return _trace_switch(args, scene, control, until, options)
     branch = trace(scene, control, until=until, options=options, start=start, progress=progress)
     display.close()
+    if args.sensitivity:
+        branch.points = _sensitivities(branch, args.scene, params, control, args.sensitivity)
     meta = {"command": "trace", "scene": scene.name, "parameters": scene.parameters, "control": control,
             "until": until, "status": branch.status, "stats": branch.stats}
     if args.out:
@@ -182,6 +184,8 @@ def cmd_trace(args) -> int:
               f"stretch_max = {row['stretch_max']:.6g}  located = {row['located']}")
     if branch.points.empty:
         print("no critical points")
+    for column in (c for c in branch.points.columns if c.startswith(f"d{control}_d")):
+        print(f"{column}: " + ", ".join(f"{v:.6g}" for v in branch.points[column]))
     return 0
 
 
@@ -255,6 +259,17 @@ def restart_file(path, scene) -> dict:
     return saved
 
 
+def _sensitivities(branch, scene_name: str, params: dict, control: str, names: str):
+    """The points table with d<control>_d<name> columns (``--sensitivity c2,E_hat,...``)."""
+    from snapmem.continuation.sensitivity import branch_sensitivities
+    spec = get_spec(scene_name)
+    with_loads = loads_needed(control)
+    wanted = [n.strip() for n in names.split(",") if n.strip()]
+    if not wanted:
+        raise SnapmemError(f"--sensitivity {names!r}: give parameter names separated by commas, e.g. c2,E_hat")
+    return branch_sensitivities(branch, lambda name, v: spec.build(with_loads, **{**params, name: v}), wanted)
+
+
 def cmd_fold(args) -> int:
     from snapmem.continuation.folds import fold_curve
     from snapmem.io.results import write_table
@@ -265,10 +280,13 @@ def cmd_fold(args) -> int:
     with_loads = loads_needed(args.control, name)
     spec.resolve(**{**params, name: values[0]})          # unknown names fail before any work
     display = Progress(file_interval=None)
-    table = fold_curve(lambda v: spec.build(with_loads, **{**params, name: v}), values, args.control,
-                       progress=lambda i, n: display.show(f"fold {args.scene}: {i}/{n} values of {name} "
-                                                          f"[{display.elapsed:.1f} s]"))
+    scene_at = lambda v: spec.build(with_loads, **{**params, name: v})        # noqa: E731
+    table, folds = fold_curve(scene_at, values, args.control, return_folds=True,
+                              progress=lambda i, n: display.show(f"fold {args.scene}: {i}/{n} values of {name} "
+                                                                 f"[{display.elapsed:.1f} s]"))
     display.close()
+    if args.points:
+        _fold_points(scene_at, values, folds, args, name, params)
     table = table.rename(columns={"value": name, "limit": f"{args.control}_limit"})
     meta = {"command": "fold", "scene": args.scene, "parameters": params, "vary": name, "control": args.control}
     if args.out:
@@ -282,6 +300,22 @@ def cmd_fold(args) -> int:
                  if c in table.columns]
         print(table[shown].to_string(index=False))
     return 0
+
+
+def _fold_points(scene_at, values, folds, args, name, params) -> None:
+    """``fold --points SPECIAL.csv``: the cusps (CP) and turning points (TP) of the fold curve,
+    a column named after the varied parameter holding its value."""
+    from snapmem.continuation.folds import fold_special_points
+    from snapmem.io.results import write_table
+    special, iterations = fold_special_points(scene_at, values, folds, args.control)
+    special = special.rename(columns={"value": name, "limit": f"{args.control}_limit"})
+    write_table(special, args.points, {"command": "fold --points", "scene": args.scene, "parameters": params,
+                                       "vary": name, "control": args.control, "newton_iterations": iterations})
+    for _, row in special.iterrows():
+        print(f"{row['kind']}: {name} = {row[name]:.8g}  {args.control}_limit = {row[f'{args.control}_limit']:.8g}  "
+              f"stretch_max = {row['stretch_max']:.6g}")
+    if special.empty:
+        print("no cusp or turning point of the fold curve in this range")
 
 
 def cmd_sweep(args) -> int:
@@ -477,6 +511,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--start-index", type=integer, default=-1, help="which saved point to restart from (default last)")
     p.add_argument("--switch", metavar="BRANCH.npz:K", help="switch at the BP in row K of the points table of a "
                    "branch saved by trace --out and trace the new branch both ways (--out writes the diagram)")
+    p.add_argument("--sensitivity", metavar="NAME,NAME,...",
+                   help="add d<control>_d<NAME> at each limit point to the points table (e.g. c2,E_hat)")
     p.set_defaults(func=cmd_trace)
 
     p = sub.add_parser("fold", help="follow a limit point as a second parameter varies")
@@ -487,6 +523,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--control", choices=LOAD_CONTROLS, default="pressure")
     p.add_argument("--out", metavar="FOLD.csv")
     p.add_argument("--plot", metavar="FIG.png")
+    p.add_argument("--points", metavar="SPECIAL.csv",
+                   help="cusps (CP) and turning points (TP) of the fold curve, one row each")
     p.set_defaults(func=cmd_fold)
 
     p = sub.add_parser("hysteresis", help="up, snap, down, snap back: a hysteresis loop in one call")

@@ -24,6 +24,7 @@ STUDIES = [
     ("fig5_electro_torus", ["--out", "results"]),
     ("torus_limit_maps", ["--out", "results"]),
     ("torus_limit_convergence", ["--out", "results"]),
+    ("balloon_atlas", ["--out", "results"]),
     ("robot_curves", ["--out", "results/robots"]),
     ("fig6_8_robots", ["--out", "results", "--tables", "results/robots"]),
     ("fig9_timing", ["--out", "results"]),

@@ -27,6 +27,8 @@ class PointKind(str, Enum):
     SAVE = "SAVE"            #: located on a ``save_at`` value
     END = "END"              #: located where the trace stopped (an ``until`` value)
     CRITICAL = "critical"    #: a critical point located but not yet classified
+    LE = "LE"                #: loss of ellipticity: the membrane model is ill-posed beyond it (the trace ends)
+    LT = "LT"                #: loss of tension: a principal tension falls to zero (wrinkling; the trace goes on)
 
 
 class Outcome(str, Enum):
@@ -38,6 +40,7 @@ class Outcome(str, Enum):
     STEP_TOO_SMALL = "step_too_small"      #: a step was rejected at ``ds_min``
     TENSION_LOST = "tension_lost"          #: a :class:`~snapmem.continuation.events.LossOfTension` event stopped it
     STOPPED = "stopped"                    #: an event passed to ``trace`` stopped it
+    ELLIPTICITY_LOST = "ellipticity_lost"  #: the membrane lost strong ellipticity (:class:`~snapmem.continuation.events.LossOfEllipticity`)
 
 
 @dataclass

@@ -10,7 +10,8 @@ one ends the trace after the new point; the events after it are still called (on
 earlier).
 
 The tracer builds its events from the options and ``until`` (:func:`events_from`), in this
-order: :class:`CriticalPoints`, :class:`SaveAt`, :class:`Until`, :class:`StopAtFirstLimit`, then
+order: :class:`CriticalPoints`, :class:`LossOfEllipticity`, :class:`LossOfTension` (recording
+kind LT, not stopping), :class:`SaveAt`, :class:`Until`, :class:`StopAtFirstLimit`, then
 those passed as ``trace(..., events=[...])``. A new event is a subclass of :class:`Event`; no
 loop changes. For example, to record where the volume crosses V0::
 
@@ -29,6 +30,7 @@ from typing import Callable, Mapping
 from snapmem.continuation.branch import Outcome, Point, PointKind
 from snapmem.continuation.locate import locate_critical, locate_value, touching
 from snapmem.continuation.options import ContinuationOptions
+from snapmem.model.local_checks import LocalState, local_state
 
 
 @dataclass
@@ -164,9 +166,17 @@ class StopAtFirstLimit(Event):
 
 
 class LossOfTension(Event):
-    """Stop where the membrane goes slack: the smallest principal tension ``min_tension`` [N/m]
-    falls to zero between two points; the branch ends at the point located there (kind END).
-    Not among the events the options build: pass it as ``trace(..., events=[LossOfTension()])``."""
+    """Where the membrane goes slack: the smallest principal tension ``min_tension`` [N/m] falls
+    to zero between two points.
+
+    With ``stop`` (the default) the branch ends at the point located there (kind END, outcome
+    TENSION_LOST). Without, the point is recorded (kind LT: the membrane wrinkles there and the
+    model's answer beyond is not physical) and the trace goes on; the tracer watches for this
+    at every step (:func:`events_from`).
+    """
+
+    def __init__(self, stop: bool = True):
+        self.stop = stop
 
     def check(self, step: Step) -> Found | None:
         def tension(point):
@@ -174,11 +184,55 @@ class LossOfTension(Event):
 
         if not tension(step.previous) > 0.0 >= tension(step.new):
             return None
-        point = step.locate(tension, PointKind.END)
+        if not self.stop:
+            point = step.locate(tension, PointKind.LT)
+            return None if point is None else Found([point])
+        # the recording event the tracer runs first has located it already: end there
+        point = next((p for p in step.found if p.kind == PointKind.LT), None) or step.locate(tension, PointKind.END)
         if point is None:
             return None
+        point.kind = PointKind.END
         control = step.tracer.pb.control
         return Found(stop=Stop(Outcome.TENSION_LOST, f"tension lost at {control} = {point.lam:.6g}", point))
+
+
+class LossOfEllipticity(Event):
+    """Stop where the membrane energy (electric term included) stops being strongly elliptic on
+    some edge (:func:`snapmem.model.local_checks.ellipticity_margins`): beyond it the model is
+    ill-posed (mesh-scale modes, critical points that depend on the mesh), so the branch ends at
+    the point located there (kind LE, outcome ELLIPTICITY_LOST) and nothing past it is reported.
+    The tracer watches for this at every step (:func:`events_from`); scenes without a membrane
+    energy are not checked.
+    """
+
+    def __init__(self):
+        self._cache: dict = {}           # id(point) -> (point, LocalState), the last few points
+
+    def local(self, step: Step, point: Point) -> LocalState | None:
+        """The local checks at ``point`` (cached: each accepted point is checked once)."""
+        hit = self._cache.get(id(point))
+        if hit is not None and hit[0] is point:
+            return hit[1]
+        q, loads = step.tracer.pb.state(point.x, point.lam)
+        state = local_state(step.tracer.scene, q, loads, with_tension=False)     # tension: LossOfTension
+        if len(self._cache) > 8:
+            self._cache.clear()
+        self._cache[id(point)] = (point, state)
+        return state
+
+    def check(self, step: Step) -> Found | None:
+        before, after = self.local(step, step.previous), self.local(step, step.new)
+        if before is None or not before.ellipticity > 0.0 >= after.ellipticity:
+            return None
+        at = step.locate(lambda point: self.local(step, point).ellipticity, PointKind.LE)
+        if at is None:             # not located: end at the new point, the first one past it
+            at = step.new
+            at.kind, at.located = PointKind.LE, False
+        state = self.local(step, at)
+        control = step.tracer.pb.control
+        status = (f"loss of ellipticity at {control} = {at.lam:.6g}, stretch {state.stretch:.4g}: "
+                  "the membrane model is ill-posed beyond this point")
+        return Found(stop=Stop(Outcome.ELLIPTICITY_LOST, status, at))
 
 
 def events_from(options: ContinuationOptions, until: Mapping[str, float] | None = None) -> list[Event]:
@@ -186,6 +240,7 @@ def events_from(options: ContinuationOptions, until: Mapping[str, float] | None 
     events: list[Event] = []
     if options.stability:
         events.append(CriticalPoints())
+    events += [LossOfEllipticity(), LossOfTension(stop=False)]
     if options.save_at:
         events.append(SaveAt(options.save_at))
     if until:

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import asdict
 from typing import Callable
 
+import logging
+
 import numpy as np
 import snapmem._lazy as _lazy
 
@@ -18,6 +20,10 @@ from snapmem.continuation.tracer import trace
 from snapmem.errors import SnapmemError, SolverError, check_real
 from snapmem.model.scene import Scene
 from snapmem.threads import single_threaded
+
+#: the branch measures of a fold curve's rows (NaN where no limit point exists)
+MEASURES = ("pressure", "voltage", "E_hat", "volume", "u_max", "stretch_max", "min_tension")
+
 
 @single_threaded
 def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "pressure",
@@ -78,6 +84,9 @@ def fold_curve(scene_at: Callable[[float], Scene], values, control: str = "press
         if progress is not None:
             progress(i + 1, len(values))
     table = pd.DataFrame(rows)
+    for column in MEASURES:                     # where no value has a limit point, no row has them
+        if column not in table:
+            table[column] = np.nan
     table = table[["value", "limit", "exists", "method", "iterations", "status"]
                   + [c for c in table.columns if c not in ("value", "limit", "exists", "method", "iterations", "status")]]
     return (table, folds) if return_folds else table
@@ -98,12 +107,13 @@ def _fold_by_trace(scene, control, options, trace_options):
     pb = make_problem(scene, control)
     lp = next(p for p in br.states if p.kind == PointKind.LP)
     _, K = pb.evaluate(lp.x, lp.lam)
-    phi = _null_vector(K)
+    phi = null_vector(K)
     return {"limit": lp.lam, "exists": True, "method": "trace", "iterations": iterations,
             "status": "located", **pb.measures(lp.x, lp.lam), "_fold": True, "_x": lp.x, "_phi": phi}
 
 
-def _null_vector(K):
+def null_vector(K):
+    """A unit null vector of the (nearly) singular K: three inverse iterations from a fixed random start."""
     lu = K.factor()
     phi = np.random.default_rng(1).normal(size=K.n)
     if not lu.singular:
@@ -141,3 +151,44 @@ def _continue_fold(scene_at, previous, value, control, options, references, dept
     x, lam, phi_new, iterations = result
     return {"limit": lam, "exists": True, "method": "fold", "iterations": iterations, "status": "located",
             **pb.measures(x, lam), "_fold": True, "_x": x, "_phi": phi_new}
+
+
+@single_threaded
+def fold_special_points(scene_at: Callable[[float], Scene], values, folds: dict, control: str = "pressure",
+                        max_steps: int = 200) -> tuple[pd.DataFrame, int]:
+    """The codimension-2 points on the fold curve within the range of ``values``: cusps (kind
+    ``CP``) and turning points of the curve in the second parameter (``TP``).
+
+    From the first limit point :func:`fold_curve` found (``folds``, as its ``return_folds``
+    gives them) the curve of limit points is traced by pseudo-arclength in (x, lam, value) both
+    ways (:func:`snapmem.continuation.codim2.singular_curve`), so it passes the turning points
+    where fixed-value stepping ends.
+
+    Returns
+    -------
+    (pandas.DataFrame, int)
+        One row per special point: ``kind``, ``value``, ``limit`` (the control there), ``a``
+        (the normal-form coefficient phi . D3Pi[phi, phi, phi], zero at a cusp) and the measures;
+        and the Newton iterations it took.
+    """
+    from snapmem.continuation.codim2 import singular_curve
+    columns = ["kind", "value", "limit", "a"] + list(MEASURES)
+    if not folds:
+        return pd.DataFrame(columns=columns), 0
+    low, high = min(values), max(values)
+    v0, x0, lam0, phi0 = next(iter(folds.values()))          # the first one found
+    found, iterations = [], 0
+    for direction in (1, -1):
+        try:
+            curve = singular_curve(scene_at, v0, x0, lam0, phi0, control, v_range=(low, high),
+                                   direction=direction, max_steps=max_steps, v_scale=(high - low) or abs(v0) or 1.0)
+        except (SolverError, SnapmemError) as exc:
+            logging.getLogger(__name__).warning("fold curve from %g: %s", v0, exc)
+            continue
+        iterations += curve.newton_iterations
+        found.append(curve.special)
+    table = pd.concat([f for f in found if not f.empty], ignore_index=True) if any(not f.empty for f in found) \
+        else pd.DataFrame(columns=["kind", "v", "lam", "a"] + list(MEASURES))
+    table = table[(table["v"] >= low) & (table["v"] <= high)] if len(table) else table
+    table = table.drop_duplicates(subset=["kind", "v"]).rename(columns={"v": "value", "lam": "limit"})
+    return table[[c for c in columns if c in table.columns]].reset_index(drop=True), iterations

@@ -45,6 +45,10 @@ from snapmem.threads import single_threaded
 log = logging.getLogger(__name__)
 
 
+#: the kinds of point listed in a branch's points table (and named in its ``point`` column)
+_SPECIAL = (PointKind.LP, PointKind.BP, PointKind.LE, PointKind.LT)
+
+
 class Tracer:
     """The predictor-corrector of one branch: its problem ``pb``, options ``opt``, the arclength
     inner product and the work counters (Newton iterations, evaluations)."""
@@ -243,7 +247,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
             continue
         inserts, stop = _watch(watch, Step(tracer, base, p, points, []))
         points.extend(sorted(inserts, key=lambda c: c.s))
-        critical.extend(c for c in inserts if c.kind in (PointKind.LP, PointKind.BP))
+        critical.extend(c for c in inserts if c.kind in _SPECIAL)
         if stop is not None and stop.at is not None:
             status, outcome = stop.status, stop.outcome
             break
@@ -323,7 +327,7 @@ def _assemble(scene, control, pb, points, critical, rejections, status, outcome,
                "min_eig": p.test_value if p.eigs is None else float(p.eigs[0]),
                "negative_eigs": -1 if p.negative is None else int(p.negative),
                "stable": bool(p.negative == 0) if p.negative is not None else None,
-               "point": PointKind(p.kind).value if p.kind in (PointKind.LP, PointKind.BP) else "",
+               "point": PointKind(p.kind).value if p.kind in _SPECIAL else "",
                "save_at": p.kind == PointKind.SAVE, "ds": p.ds, "iterations": p.iterations}
         rows.append(row)
     table = pd.DataFrame(rows)

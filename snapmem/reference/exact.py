@@ -89,27 +89,113 @@ def balloon_dynamics(pressure, t_end, R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat
     return sol.sol
 
 
+# --------------------------------------------------------------------------------------------
+# bifurcations, loss of ellipticity and cusps of the inflated sphere (MODEL.md section 7)
+
+def _mooney_rivlin_equibiaxial(lam, c1, c2, E_hat):
+    """(W1, W11, W12) of the Mooney-Rivlin W_eff = W - (mu/2) E_hat^2 lam1^2 lam2^2 at
+    lam1 = lam2 = lam, mu = 2 (c1 + c2) (normalised: c1 + c2 = 1/2 is mu = 1)."""
+    lam = np.asarray(lam, dtype=float)
+    a = 2.0 * (c1 + c2) * E_hat ** 2
+    w1 = 2 * c1 * (lam - lam ** -5) + 2 * c2 * (lam ** 3 - lam ** -3) - a * lam ** 3
+    w11 = 2 * c1 + 6 * c1 * lam ** -6 + 6 * c2 * lam ** -4 + 2 * c2 * lam ** 2 - a * lam ** 2
+    w12 = 4 * c1 * lam ** -6 + 4 * c2 * lam ** 2 - 2 * a * lam ** 2
+    return w1, w11, w12
+
+
 def sphere_bifurcation_criterion(lam, n, c1=0.4375, c2=0.0625, E_hat=0.0):
-    """The axisymmetric P_n bifurcation criterion of a uniformly inflated Mooney-Rivlin membrane
-    sphere at stretch ``lam`` (MODEL.md section 7; Haughton & Ogden 1978), electric term included:
+    """The P_n bifurcation criterion of the uniformly inflated Mooney-Rivlin membrane sphere (array ok).
 
-        l^2 (W11^2 - W12^2) + l W1 [(N - 1) W11 + 3 W12] - 2 W1^2,   N = n (n + 1),
-
-    with W1, W11, W12 the derivatives of W_eff = c1 (I1 - 3) + c2 (I2 - 3) - (E_hat^2 / 2)
-    l1^2 l2^2 at l1 = l2 = l (units of mu). Zero where P_n bifurcates (n = 0: the pressure
-    extrema; n = 1: with a pole held)."""
-    lam = np.asarray(lam, float)
+    l^2 (W11^2 - W12^2) + l W1 [(N - 1) W11 + 3 W12] - 2 W1^2 with N = n (n + 1) and W1, W11, W12
+    the derivatives of W_eff (electric term included) at lam1 = lam2 = l (Haughton & Ogden 1978;
+    MODEL.md section 7). Zero where the axisymmetric Legendre mode P_n bifurcates from the sphere;
+    n = 0 gives the pressure extrema, n = 1 the mode of a sphere with one pole held.
+    Normalised units (mu = 2 (c1 + c2)); the value is in mu^2.
+    """
+    lam = np.asarray(lam, dtype=float)
     N = n * (n + 1)
-    W1 = 2 * c1 * (lam - lam ** -5) + 2 * c2 * (lam ** 3 - lam ** -3) - E_hat ** 2 * lam ** 3
-    W11 = 2 * c1 * (1 + 3 * lam ** -6) + 2 * c2 * (3 * lam ** -4 + lam ** 2) - E_hat ** 2 * lam ** 2
-    W12 = 4 * c1 * lam ** -6 + 4 * c2 * lam ** 2 - 2 * E_hat ** 2 * lam ** 2
-    return lam ** 2 * (W11 ** 2 - W12 ** 2) + lam * W1 * ((N - 1) * W11 + 3 * W12) - 2 * W1 ** 2
+    w1, w11, w12 = _mooney_rivlin_equibiaxial(lam, c1, c2, E_hat)
+    return lam ** 2 * (w11 ** 2 - w12 ** 2) + lam * w1 * ((N - 1) * w11 + 3 * w12) - 2 * w1 ** 2
 
 
-def sphere_bifurcation_stretches(n, c1=0.4375, c2=0.0625, E_hat=0.0, lam_max=10.0, samples=4000):
-    """The stretches in (1, lam_max] where :func:`sphere_bifurcation_criterion` of mode n
-    vanishes, ascending (sign changes on a fine grid refined by Brent's method)."""
-    grid = np.linspace(1.0 + 1e-9, lam_max, samples)
-    f = sphere_bifurcation_criterion(grid, n, c1, c2, E_hat)
-    return [brentq(sphere_bifurcation_criterion, a, b, args=(n, c1, c2, E_hat), xtol=1e-14)
-            for a, b, fa, fb in zip(grid[:-1], grid[1:], f[:-1], f[1:]) if fa * fb < 0]
+def _roots(f, lo, hi, samples=20001):
+    grid = np.geomspace(lo, hi, samples)
+    values = f(grid)
+    return [float(brentq(f, grid[i], grid[i + 1], xtol=1e-15, rtol=1e-15))
+            for i in np.flatnonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)]
+
+
+def sphere_bifurcation_stretches(n, c1=0.4375, c2=0.0625, E_hat=0.0, lam_max=10.0):
+    """Stretches 1 < lam < lam_max where the P_n mode bifurcates from the uniformly inflated
+    sphere (roots of :func:`sphere_bifurcation_criterion` on the falling part of p(lam), where
+    dp/dlam < 0 as a bifurcation needs; roots where the sphere is no longer elliptic are kept:
+    see :func:`sphere_ellipticity_loss`), ascending."""
+    def f(lam):
+        return sphere_bifurcation_criterion(lam, n, c1, c2, E_hat)
+    return [lam for lam in _roots(f, 1.0 + 1e-9, lam_max)
+            if balloon_pressure_slope(lam, c1=c1, c2=c2, E_hat=E_hat) < 0]
+
+
+def sphere_ellipticity_loss(c1=0.4375, c2=0.0625, E_hat=0.0, lam_max=10.0):
+    """The first stretch 1 < lam < lam_max where the uniformly inflated Mooney-Rivlin sphere
+    loses strong ellipticity (W11 of W_eff = 0; MODEL.md section 7), or None."""
+    roots = _roots(lambda lam: _mooney_rivlin_equibiaxial(lam, c1, c2, E_hat)[1], 1.0 + 1e-9, lam_max)
+    return roots[0] if roots else None
+
+
+def balloon_cusp_mooney_rivlin(E_hat=0.0):
+    """(c2/c1, lam, p_hat) where the Mooney-Rivlin balloon's two pressure extrema merge (its
+    snap disappears): dp/dlam = d2p/dlam2 = 0 of the exact p(lam), at mu = 2 (c1 + c2) = 1 and
+    R/H = 100. Above this ratio p(lam) rises monotonically."""
+    from scipy.optimize import fsolve
+
+    def equations(z):
+        lam, r = z
+        c1, c2 = 0.5 / (1 + r), 0.5 * r / (1 + r)
+        d1 = c1 * (7 * lam ** -8 - lam ** -2) + c2 * (5 * lam ** -6 + 1) - 0.5 * E_hat ** 2
+        d2 = c1 * (2 * lam ** -3 - 56 * lam ** -9) - 30 * c2 * lam ** -7
+        return [d1, d2]
+
+    lam, ratio = fsolve(equations, [2.0, 0.2], xtol=1e-14)
+    c1, c2 = 0.5 / (1 + ratio), 0.5 * ratio / (1 + ratio)
+    return float(ratio), float(lam), float(balloon_pressure(lam, c1=c1, c2=c2, E_hat=E_hat))
+
+
+def _gent_pressure_derivatives(lam, Jlim, E_hat=0.0, R=10.0, H=0.1):
+    """(p_hat, dp/dlam, d2p/dlam2) of the uniformly inflated Gent balloon (mu = 1).
+
+    p = (H / R) W'(lam) / lam^2 with W(lam) = -(Jlim/2) ln(1 - u/Jlim) - (E_hat^2/2) lam^4,
+    u = I1 - 3 = 2 lam^2 + lam^-4 - 3: W' = (Jlim/2) u' / (Jlim - u) - 2 E_hat^2 lam^3.
+    """
+    u = 2 * lam ** 2 + lam ** -4 - 3
+    du, d2u, d3u = 4 * lam - 4 * lam ** -5, 4 + 20 * lam ** -6, -120 * lam ** -7
+    D = Jlim - u
+    h = du / D
+    dh = d2u / D + du ** 2 / D ** 2
+    d2h = d3u / D + 3 * du * d2u / D ** 2 + 2 * du ** 3 / D ** 3
+    A = 0.5 * Jlim
+    g = A * h / lam ** 2 - 2 * E_hat ** 2 * lam
+    dg = A * (dh / lam ** 2 - 2 * h / lam ** 3) - 2 * E_hat ** 2
+    d2g = A * (d2h / lam ** 2 - 4 * dh / lam ** 3 + 6 * h / lam ** 4)
+    return H / R * g, H / R * dg, H / R * d2g
+
+
+def balloon_cusp_gent(E_hat=0.0, R=10.0, H=0.1):
+    """(Jlim, lam, p_hat) where the Gent balloon's two pressure extrema merge: dp/dlam =
+    d2p/dlam2 = 0 of the exact p(lam) (mu = 1). Below this Jlim p(lam) rises monotonically."""
+    from scipy.optimize import fsolve
+
+    def equations(z):
+        lam, J = z
+        _, d1, d2 = _gent_pressure_derivatives(lam, J, E_hat, R, H)
+        return [d1 * R / H, d2 * R / H]
+
+    lam, Jlim = fsolve(equations, [1.65, 17.8], xtol=1e-12)
+    return float(Jlim), float(lam), float(_gent_pressure_derivatives(lam, Jlim, E_hat, R, H)[0])
+
+
+def balloon_limit_sensitivity_e_hat(R=10.0, H=0.1, c1=0.4375, c2=0.0625, E_hat=0.0):
+    """d p_hat / d E_hat at the balloon's limit point: -4 (H/R) E_hat lam_LP (the envelope
+    theorem on the exact p(lam): dp/dlam = 0 there, so only the explicit E_hat dependence counts)."""
+    lam = balloon_limit_point(R, H, c1, c2, E_hat)[0]
+    return -4.0 * H / R * E_hat * lam

@@ -1,0 +1,121 @@
+"""Local well-posedness of the membrane model at a state: strong ellipticity and tension, per edge.
+
+A membrane's energy W(F), F the 3x2 map of the tangent plane, is strongly elliptic (rank-one
+convex) where d2/de2 W(F + e a (x) N) > 0 for every a in R^3 and N in R^2. For an isotropic W
+of the principal stretches (lam1, lam2), the incompressible membrane's W_eff with the electric
+term included, the perturbations split into two families:
+
+- out of the plane (a normal to the surface): d2W = W1 N1^2 / lam1 + W2 N2^2 / lam2, so the
+  principal tensions T1 = (H/lam2) W1, T2 = (H/lam1) W2 must be positive (tension field
+  theory: where they are not, the membrane wrinkles);
+- in the plane: the acoustic tensor of the 2D energy W(lam1, lam2) in the principal frame is
+  [[W11 n1^2 + a n2^2, (W12 + b - a) n1 n2], [sym, a n1^2 + W22 n2^2]] with
+  a = (lam1 W1 - lam2 W2)/(lam1^2 - lam2^2) and b = (W1 - W2)/(lam1 - lam2). It is positive
+  definite for every N = (n1, n2) iff (Knowles & Sternberg 1976)
+
+      W11 > 0,  W22 > 0,  a > 0,
+      sqrt(W11 W22) + W12 + b > 0,
+      sqrt(W11 W22) - W12 + (W1 + W2)/(lam1 + lam2) > 0.
+
+At lam1 = lam2 = lam the quotients take their limits a = (W1 + lam (W11 - W12)) / (2 lam) and
+b = W11 - W12, and the conditions reduce to W11 > 0 and a > 0; for the inflated sphere W11 = 0
+comes first (MODEL.md section 7: the limit n -> infinity of the P_n criterion).
+
+The margin of an edge is the smallest of the in-plane conditions' left-hand sides divided by
+the law's shear modulus (dimensionless); the model is ill-posed where it is <= 0. Issue 15's
+failure checks reuse these functions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from snapmem.model.materials import Density
+
+#: |lam1 - lam2| / lam below which the quotients a and b take their equal-stretch limits (the
+#: quotients lose digits as 1 / |lam1 - lam2|; the limits are off by O(|lam1 - lam2|))
+EQUAL_STRETCH = 1e-6
+
+
+def ellipticity_margins(lam1: np.ndarray, lam2: np.ndarray, dens: Density, modulus: float) -> np.ndarray:
+    """The in-plane strong-ellipticity margin of every edge (module docstring), shape (E,).
+
+    Parameters
+    ----------
+    lam1, lam2 : ndarray (E,)
+        Meridional and hoop stretches.
+    dens : Density
+        W_eff and its derivatives at (lam1, lam2) [Pa], electric term included.
+    modulus : float
+        Shear modulus [Pa] the margins are divided by.
+
+    Returns
+    -------
+    ndarray (E,)
+        min over the five conditions of their left-hand side / modulus; > 0 where elliptic.
+    """
+    w1, w2, w11, w12, w22 = dens.w1, dens.w2, dens.w11, dens.w12, dens.w22
+    diff = lam1 - lam2
+    mean = 0.5 * (lam1 + lam2)
+    equal = np.abs(diff) <= EQUAL_STRETCH * mean
+    safe = np.where(equal, 1.0, diff)
+    a = np.where(equal, (0.5 * (w1 + w2) + mean * (w11 - w12)) / (2.0 * mean),
+                 (lam1 * w1 - lam2 * w2) / (safe * (lam1 + lam2)))
+    b = np.where(equal, 0.5 * (w11 + w22) - w12, (w1 - w2) / safe)
+    root = np.sqrt(np.maximum(w11 * w22, 0.0)) * np.where((w11 > 0) & (w22 > 0), 1.0, -1.0)
+    conditions = np.stack([w11, w22, a, root + w12 + b, root - w12 + (w1 + w2) / (lam1 + lam2)])
+    return conditions.min(axis=0) / modulus
+
+
+@dataclass(frozen=True)
+class LocalState:
+    """The local checks of one state.
+
+    Attributes
+    ----------
+    ellipticity : float
+        Smallest in-plane ellipticity margin over the edges (dimensionless, > 0 where elliptic).
+    ellipticity_edge : int
+        The edge where it is smallest.
+    tension : float
+        Smallest principal tension over the edges [N/m] (> 0 where taut).
+    tension_edge : int
+        The edge where it is smallest.
+    stretch : float
+        Largest principal stretch at ``ellipticity_edge``.
+    """
+
+    ellipticity: float
+    ellipticity_edge: int
+    tension: float
+    tension_edge: int
+    stretch: float
+
+    @property
+    def elliptic(self) -> bool:
+        return self.ellipticity > 0.0
+
+    @property
+    def taut(self) -> bool:
+        return self.tension > 0.0
+
+
+def local_state(scene, q: np.ndarray, loads=None, with_tension: bool = True) -> LocalState | None:
+    """The ellipticity and tension checks of the scene's membrane at state q [m] under ``loads``
+    (resolved or None for the scene's); None if the scene has no membrane energy.
+    ``with_tension``: False leaves the tension out (NaN; a trace has it among its measures)."""
+    kin = scene.kinematics(q)
+    dens = scene.density(kin, scene.resolve_loads(loads))
+    if dens is None:
+        return None
+    margins = ellipticity_margins(kin.lam1, kin.lam2, dens, scene.mu)
+    ie = int(np.argmin(margins))
+    tension, it = float("nan"), -1
+    if with_tension:
+        t1, t2 = scene.tensions(q, loads)
+        smallest = np.minimum(t1, t2)
+        it = int(np.argmin(smallest))
+        tension = float(smallest[it])
+    return LocalState(float(margins[ie]), ie, tension, it, float(max(kin.lam1[ie], kin.lam2[ie])))
