@@ -128,12 +128,12 @@ def _roots(f, lo, hi, samples=20001):
 def sphere_bifurcation_stretches(n, c1=0.4375, c2=0.0625, E_hat=0.0, lam_max=10.0):
     """Stretches 1 < lam < lam_max where the P_n mode bifurcates from the uniformly inflated
     sphere (roots of :func:`sphere_bifurcation_criterion` on the falling part of p(lam), where
-    dp/dlam < 0 as a bifurcation needs; roots where the sphere is no longer elliptic are kept:
+    dp/dlam < 0 as a bifurcation needs; for n = 0 every root, the pressure extrema; roots where the sphere is no longer elliptic are kept:
     see :func:`sphere_ellipticity_loss`), ascending."""
     def f(lam):
         return sphere_bifurcation_criterion(lam, n, c1, c2, E_hat)
     return [lam for lam in _roots(f, 1.0 + 1e-9, lam_max)
-            if balloon_pressure_slope(lam, c1=c1, c2=c2, E_hat=E_hat) < 0]
+            if n == 0 or balloon_pressure_slope(lam, c1=c1, c2=c2, E_hat=E_hat) < 0]
 
 
 def sphere_ellipticity_loss(c1=0.4375, c2=0.0625, E_hat=0.0, lam_max=10.0):
