@@ -19,6 +19,7 @@ from snapmem.catalog.scenes import SCENES, get_spec
 from snapmem.continuation import CONTROLS
 from snapmem.dynamics import SCHEMES
 from snapmem.errors import SnapmemError, SolverError
+from snapmem.io.interrupts import sigterm_as_interrupt
 from snapmem.io.progress import Progress, bar
 from snapmem.sweeps.grid import parse_axis, parse_value
 
@@ -74,12 +75,26 @@ def parse_until(pairs: list[str]) -> dict:
             out[name] = float(value)
         except ValueError:
             raise SnapmemError(f"--until {name}={value!r}: the value must be a number") from None
+        if not np.isfinite(out[name]):
+            raise SnapmemError(f"--until {name}={value!r}: the value must be a finite number (a target the "
+                               "branch can reach)")
     return out
 
 
+def trace_outputs(out, points, plot) -> dict:
+    """The files ``snapmem trace`` writes, by option; SnapmemError if two are the same file."""
+    from snapmem.io.results import distinct_outputs, sidecar
+    files = {"--out": [] if not out else [out, sidecar(out), Path(out).with_suffix(".npz")],
+             "--points": [] if not points else [points, sidecar(points)],
+             "--plot": [] if not plot else [plot]}
+    distinct_outputs(files)
+    return files
+
+
 def cmd_trace(args) -> int:
-    from snapmem.continuation import ContinuationOptions, load_points, trace
-    from snapmem.io.results import write_table
+    from snapmem.continuation import ContinuationOptions, Outcome, load_points, trace
+    from snapmem.io.results import OutputSet
+    files = trace_outputs(args.out, args.points, args.plot)
     params = parse_sets(args.set)
     control = args.control
     scene = get_spec(args.scene).build(loads_needed(control), **params)
@@ -112,16 +127,17 @@ def cmd_trace(args) -> int:
     display.close()
     meta = {"command": "trace", "scene": scene.name, "parameters": scene.parameters, "control": control,
             "until": until, "status": branch.status, "stats": branch.stats}
-    if args.out:
-        write_table(branch.table, args.out, meta)
-        branch.save(str(Path(args.out).with_suffix(".npz")))
-    if args.points:
-        write_table(branch.points, args.points, meta)
-    if args.plot:
-        from snapmem.viz.plotting import plot_branch
-        x = args.x or next(iter(scene.probes), "u_max")
-        plot_branch(branch.table, x, control if control != "volume" else "pressure", path=args.plot,
-                    title=f"{scene.name}: {branch.status}")
+    with OutputSet() as outputs:                      # all of them or none; a signal waits for the set
+        if args.out:
+            outputs.table(branch.table, args.out, meta)
+            branch.save(outputs.stage(files["--out"][2]))
+        if args.points:
+            outputs.table(branch.points, args.points, meta)
+        if args.plot:
+            from snapmem.viz.plotting import plot_branch
+            x = args.x or next(iter(scene.probes), "u_max")
+            plot_branch(branch.table, x, control if control != "volume" else "pressure", path=outputs.stage(args.plot),
+                        title=f"{scene.name}: {branch.status}")
     print(f"status: {branch.status}")
     print(f"points: {len(branch.table)}  steps: {branch.stats['steps']}  rejected: {branch.stats['rejected']}  "
           f"newton_iterations: {branch.stats['newton_iterations']}")
@@ -131,12 +147,17 @@ def cmd_trace(args) -> int:
               f"stretch_max = {row['stretch_max']:.6g}  located = {row['located']}")
     if branch.points.empty:
         print("no critical points")
-    return 0
+    done = branch.outcome is Outcome.TARGET_REACHED or (branch.outcome is Outcome.FIRST_LIMIT
+                                                         and args.stop_at_first_limit)
+    if not done:                                       # exit 1: distinguishable from success
+        print(f"target not reached: {', '.join(f'{k} = {v:g}' for k, v in until.items())} ({branch.status})")
+    return 0 if done else 1
 
 
 def cmd_fold(args) -> int:
     from snapmem.continuation.folds import fold_curve
-    from snapmem.io.results import write_table
+    from snapmem.io.results import OutputSet, distinct_outputs, sidecar
+    distinct_outputs({"--out": [args.out, sidecar(args.out)] if args.out else [], "--plot": [args.plot]})
     params = parse_sets(args.set)
     name, values = parse_axis(args.vary, option="--vary", number=True)
     values = [float(v) for v in values]
@@ -150,11 +171,12 @@ def cmd_fold(args) -> int:
     display.close()
     table = table.rename(columns={"value": name, "limit": f"{args.control}_limit"})
     meta = {"command": "fold", "scene": args.scene, "parameters": params, "vary": name, "control": args.control}
-    if args.out:
-        write_table(table, args.out, meta)
-    if args.plot:
-        from snapmem.viz.plotting import plot_xy
-        plot_xy(table, name, f"{args.control}_limit", args.plot, title=f"{args.scene}: limit points")
+    with OutputSet() as outputs:
+        if args.out:
+            outputs.table(table, args.out, meta)
+        if args.plot:
+            from snapmem.viz.plotting import plot_xy
+            plot_xy(table, name, f"{args.control}_limit", outputs.stage(args.plot), title=f"{args.scene}: limit points")
     with pd.option_context("display.width", 200, "display.max_columns", 12):
         print(table[[name, f"{args.control}_limit", "exists", "method", "iterations", "u_max"]].to_string(index=False))
     return 0
@@ -185,6 +207,10 @@ def cmd_simulate(args) -> int:
     import dataclasses
     from snapmem.catalog.robots import EXPERIMENTS, events, experiment
     from snapmem.dynamics.driver import simulate
+    from snapmem.io.results import OutputSet
+    out = None
+    if args.out:                                       # the name Trajectory.save writes ('.npz' appended if missing)
+        out = Path(args.out) if Path(args.out).suffix == ".npz" else Path(args.out + ".npz")
     params = parse_sets(args.set)
     ex = experiment(args.scene, **params)
     t_end = ex.t_end if args.t_end is None else float(args.t_end)
@@ -216,10 +242,16 @@ def cmd_simulate(args) -> int:
             lines[f"final_{key}"] = float(traj[key][-1])
     if args.scene in EXPERIMENTS and meta["status"] == "completed":
         lines.update({f"event_{k}": v for k, v in events(traj).items()})     # snap times, ball heights, ...
+    if meta.get("interrupted"):
+        lines["status"] = f"interrupted ({meta['status']})"
     for name, value in lines.items():
         print(f"{name}: {value:.6g}" if isinstance(value, float) else f"{name}: {value}")
-    if args.out:
-        print(f"saved: {traj.save(args.out)}")
+    if out is not None:                                # the frames so far, also when interrupted
+        with OutputSet() as outputs:
+            traj.save(outputs.stage(out))
+        print(f"saved: {out}")
+    if meta.get("interrupted"):
+        raise KeyboardInterrupt                        # exit 130, after the frames are saved
     return 0 if meta["status"] == "completed" else 1
 
 
@@ -234,20 +266,24 @@ def cmd_replay(args) -> int:
 
 def cmd_hysteresis(args) -> int:
     from snapmem.continuation.hysteresis import hysteresis
-    from snapmem.io.results import write_table
+    from snapmem.io.results import OutputSet, distinct_outputs, sidecar
+    snaps_path = str(Path(args.out).with_suffix("")) + "_snaps.csv" if args.out else None
+    distinct_outputs({"--out": [args.out, sidecar(args.out), snaps_path, sidecar(snaps_path)] if args.out else [],
+                      "--plot": [args.plot]})
     params = parse_sets(args.set)
     scene = get_spec(args.scene).build(loads_needed(args.control), **params)
     loop = hysteresis(scene, args.control, peak=args.peak)
     meta = {"command": "hysteresis", "scene": scene.name, "parameters": scene.parameters, "control": args.control,
             "status": loop.status}
-    if args.out:
-        write_table(loop.table, args.out, meta)
-        write_table(loop.snaps, str(Path(args.out).with_suffix("")) + "_snaps.csv", meta)
-    if args.plot:
-        from snapmem.viz.plotting import plot_hysteresis
-        x = next(iter(scene.probes), "u_max")
-        plot_hysteresis(loop.table, loop.snaps, x, args.control, args.plot,
-                        title=f"{scene.name}: hysteresis ({loop.status})")
+    with OutputSet() as outputs:
+        if args.out:
+            outputs.table(loop.table, args.out, meta)
+            outputs.table(loop.snaps, snaps_path, meta)
+        if args.plot:
+            from snapmem.viz.plotting import plot_hysteresis
+            x = next(iter(scene.probes), "u_max")
+            plot_hysteresis(loop.table, loop.snaps, x, args.control, outputs.stage(args.plot),
+                            title=f"{scene.name}: hysteresis ({loop.status})")
     print(f"status: {loop.status}")
     for _, row in loop.snaps.iterrows():
         print(f"{row['event']}: at {args.control} = {row['control_at_limit']:.8g}, settled at "
@@ -364,7 +400,8 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
         logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                             format="%(levelname)s %(name)s: %(message)s")
-        return args.func(args)
+        with sigterm_as_interrupt():                   # kill PID ends a run as Ctrl-C does: exit 130
+            return args.func(args)
     except (SnapmemError, SolverError) as exc:
         if debug:
             raise

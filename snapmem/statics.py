@@ -12,7 +12,7 @@ from typing import Mapping
 
 from snapmem.continuation.tracer import snap_by_tracing
 from snapmem.model.scene import Scene
-from snapmem.solvers.newton import Equilibrium, NewtonOptions
+from snapmem.solvers.newton import Equilibrium, NewtonOptions, finite_or_not_converged
 from snapmem.solvers.ramp import LOAD_ORDER, ramp
 from snapmem.threads import single_threaded
 
@@ -29,6 +29,7 @@ def equilibrium(scene: Scene, loads: Mapping[str, float] | None = None,
     predictor. If the increments stall, the path has reached a limit point: the membrane snaps.
     The branch is then traced past the fold (pseudo-arclength) to where the load is back at its
     target; the report's reason says so ('snapped through at pressure = ...'). If that state is
-    not stable, or the branch never returns to the target, the result is not converged.
+    not stable, or the branch never returns to the target, the result is not converged; nor is it
+    where the state or an output is NaN or inf (status ``not_finite``).
     """
-    return ramp(scene, loads, options, min_fraction_step, snap=snap_by_tracing)
+    return finite_or_not_converged(ramp(scene, loads, options, min_fraction_step, snap=snap_by_tracing))

@@ -39,7 +39,13 @@ def uninterrupted(tmp_path_factory):
     stdout, stderr = run.communicate(timeout=120)
     assert run.returncode == 0, stderr
     assert "200 rows; converged 200" in stdout
-    return out.read_bytes()
+    return out.read_bytes(), Path(str(out) + ".sweep.json").read_bytes()
+
+
+def journal(out, rows: bytes, uninterrupted):
+    """Write a journal's rows and its metadata file (the grid and settings it was made with)."""
+    out.write_bytes(rows)
+    Path(str(out) + ".sweep.json").write_bytes(uninterrupted[1])
 
 
 def kill_after(out, rows):
@@ -62,25 +68,25 @@ def test_killed_twice_and_resumed_gives_the_rows_of_an_uninterrupted_run(tmp_pat
     run = snapmem_sweep(out)
     stdout, stderr = run.communicate(timeout=120)
     assert run.returncode == 0, stderr
-    assert out.read_bytes() == uninterrupted           # same rows, same order, same bytes
+    assert out.read_bytes() == uninterrupted[0]        # same rows, same order, same bytes
 
 
 def test_a_line_cut_short_by_a_kill_is_dropped_and_rerun(tmp_path, uninterrupted):
     out = tmp_path / "rows.csv"
-    lines = uninterrupted.split(b"\n")
-    out.write_bytes(b"\n".join(lines[:120]) + b"\n" + lines[120][:17])     # 119 rows and a partial one
+    lines = uninterrupted[0].split(b"\n")
+    journal(out, b"\n".join(lines[:120]) + b"\n" + lines[120][:17], uninterrupted)     # 119 rows and a partial one
     run = snapmem_sweep(out)
     run.communicate(timeout=120)
     assert run.returncode == 0
-    assert out.read_bytes() == uninterrupted
+    assert out.read_bytes() == uninterrupted[0]
 
 
 def test_a_finished_sweep_reruns_nothing(tmp_path, uninterrupted):
     out = tmp_path / "rows.csv"
-    out.write_bytes(uninterrupted)
+    journal(out, uninterrupted[0], uninterrupted)
     t0 = time.monotonic()
     assert main(["sweep", *GRID, "--out", str(out), "--quiet"]) == 0
-    assert out.read_bytes() == uninterrupted
+    assert out.read_bytes() == uninterrupted[0]
     assert time.monotonic() - t0 < 5
 
 
@@ -90,7 +96,7 @@ def test_dask_local_cluster_gives_the_rows_of_the_local_pool(tmp_path, uninterru
     run = snapmem_sweep(out, "--scheduler", "local")
     stdout, stderr = run.communicate(timeout=180)
     assert run.returncode == 0, stderr
-    assert out.read_bytes() == uninterrupted
+    assert out.read_bytes() == uninterrupted[0]
 
 
 def designs_that_fail(design):

@@ -217,6 +217,12 @@ def events(traj: Trajectory) -> dict:
       (fastest fall after it).
     * grippers and torus_snap: ``snap`` (time of the fastest volume change); torus_snap adds
       ``outer_radius`` (final) [m].
+
+    A snap is reported only when it happened (else NaN): the fastest volume change must come
+    with a burst of kinetic energy, over :data:`SNAP_KINETIC_RATIO` times the quietest frame
+    before it, and that quiet frame must come after the start. The response to the loads applied
+    at t = 0 (the pump's voltage: a start-up transient, moving from the first frame on) is not a
+    snap; nor is a membrane that only follows its slowly changing load.
     * ball_drop: ``impact`` (the ball's gap first falls below the barrier width), ``bounce``
       (its first lowest point) and ``rebound`` (the highest point after that) [s], and
       ``rebound_height``, the ball centre's height above the plate there [m].
@@ -234,19 +240,48 @@ def events(traj: Trajectory) -> dict:
     name = traj.meta.get("scene", "")
     if name in ("ball_drop", "ball_throw"):
         return _ball_events(traj, name)
-    rate = np.diff(volume) / np.maximum(np.diff(t), 1e-300)
-    mid = 0.5 * (t[:-1] + t[1:])
+    kinetic = traj["kinetic"]
     out = {}
     if name == "pump":
         t_down = traj.meta["parameters"]["t_down"]
-        up = mid < t_down
-        out["snap"] = float(mid[up][np.argmax(rate[up])])
-        out["snap_back"] = float(mid[~up][np.argmin(rate[~up])]) if np.any(~up) else float("nan")
+        mid = 0.5 * (t[:-1] + t[1:])
+        out["snap"] = _snap(t, volume, kinetic, mid < t_down, +1)
+        out["snap_back"] = _snap(t, volume, kinetic, mid >= t_down, -1)
     else:
-        out["snap"] = float(mid[np.argmax(np.abs(rate))])
+        out["snap"] = _snap(t, volume, kinetic, np.ones(t.size - 1, dtype=bool), 0)
     if name == "torus_snap":
         out["outer_radius"] = float(traj["r"][-1].max())
     return out
+
+
+#: A snap's kinetic energy is over this many times that of the quietest frame before it.
+SNAP_KINETIC_RATIO = 100.0
+
+
+def _snap(t, volume, kinetic, intervals, direction: int) -> float:
+    """Midpoint time [s] of the fastest volume change among ``intervals`` (bool, one per pair of
+    frames; growth if ``direction`` > 0, fall if < 0, either if 0), if it is a snap; else NaN.
+
+    A snap is a burst of motion out of a quiet state: the kinetic energy at the change (its two
+    frames and the next) exceeds :data:`SNAP_KINETIC_RATIO` times its smallest value over the
+    frames before it, the run's first instant excluded (a run starts from rest: motion from
+    there on is the response to the start, not a snap).
+    """
+    nan = float("nan")
+    rate = np.diff(volume) / np.maximum(np.diff(t), 1e-300)
+    score = rate * direction if direction else np.abs(rate)
+    where = np.flatnonzero(intervals)
+    if where.size == 0:
+        return nan
+    i = int(where[np.argmax(score[where])])
+    if not score[i] > 0:
+        return nan
+    before = np.arange(i + 1)
+    before = before[(t[before] > t[0]) & (before >= where[0])]       # after the start, inside the window
+    if before.size == 0:
+        return nan
+    quiet, burst = float(kinetic[before].min()), float(kinetic[i:i + 3].max())
+    return float(0.5 * (t[i] + t[i + 1])) if burst > SNAP_KINETIC_RATIO * quiet else nan
 
 
 def _ball_events(traj: Trajectory, name: str) -> dict:
