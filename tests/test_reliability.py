@@ -254,6 +254,17 @@ def test_a_real_snap_is_still_reported():
     traj = run("torus_snap", nodes=40, t_end=8.0)
     snap = events(traj)["snap"]
     assert 2.0 < snap < 6.0 and snap == pytest.approx(traj.snap_time(), rel=1e-12)
+    assert math.isnan(events(run("torus_snap", nodes=40, t_end=2.0))["snap"])        # before the snap: none
+    thrown = events(run("ball_throw", t_end=1.7))
+    assert 1.3 < thrown["snap"] < thrown["launch"] < 1.7 and thrown["ball_apex"] > 0.3
+
+
+def test_a_ramp_that_has_not_snapped_reports_no_snap_nor_flight():
+    """Failed on ed30f81: ball_throw stopped at 0.3 s (1.2 s before its snap) reported a snap at
+    0.18 s and a ball apex (the resting height)."""
+    from snapmem.catalog.robots import events, run
+    ev = events(run("ball_throw", t_end=0.3))
+    assert math.isnan(ev["snap"]) and math.isnan(ev["launch"]) and math.isnan(ev["ball_apex"])
 
 
 def test_hysteresis_with_no_jump_is_not_a_closed_loop():

@@ -21,13 +21,13 @@ def write_table(table: pd.DataFrame, path, meta: dict | None = None) -> Path:
     if path.parent and not path.parent.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    table.to_csv(tmp, index=False)
-    os.replace(tmp, path)
+    try:
+        table.to_csv(tmp, index=False)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)                    # only left if the write did not finish
     if meta is not None:
-        side = path.with_name(path.name + ".json")
-        tmp = side.with_name(side.name + ".tmp")
-        tmp.write_text(json.dumps({"snapmem": __version__, **meta}, indent=2, default=str))
-        os.replace(tmp, side)
+        write_json(meta, sidecar(path))
     return path
 
 

@@ -237,11 +237,15 @@ class RowFile:
             return
         rows[1:] = sorted(rows[1:], key=lambda row: (int(row[0]), row[1]))
         tmp = self.path + ".tmp"
-        with open(tmp, "w", newline="", encoding="utf-8") as f:
-            csv.writer(f, lineterminator="\n").writerows(rows)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, self.path)
+        try:
+            with open(tmp, "w", newline="", encoding="utf-8") as f:
+                csv.writer(f, lineterminator="\n").writerows(rows)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, self.path)
+        finally:
+            if os.path.exists(tmp):                  # interrupted before the rename: the old file is whole
+                os.unlink(tmp)
         _fsync_folder(self.path)
 
     def close(self):
@@ -287,11 +291,15 @@ def write_meta(path, meta: dict):
     """Write a sweep's metadata beside its CSV ``path`` (atomically)."""
     side = meta_path(path)
     tmp = side + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as f:
-        json.dump(meta, f, indent=1, sort_keys=True)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, side)
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(meta, f, indent=1, sort_keys=True)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, side)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def read_rows(path):
