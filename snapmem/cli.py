@@ -84,9 +84,9 @@ def parse_until(pairs: list[str]) -> dict:
 def trace_outputs(out, points, plot) -> dict:
     """The files ``snapmem trace`` writes, by option; SnapmemError if two are the same file."""
     from snapmem.io.results import distinct_outputs, sidecar
-    files = {"--out": [] if not out else [out, sidecar(out), Path(out).with_suffix(".npz")],
-             "--points": [] if not points else [points, sidecar(points)],
-             "--plot": [] if not plot else [plot]}
+    files = {"--out": [out], "--out's parameters": [out and sidecar(out)],
+             "--out's states": [out and Path(out).with_suffix(".npz")],
+             "--points": [points], "--points' parameters": [points and sidecar(points)], "--plot": [plot]}
     distinct_outputs(files)
     return files
 
@@ -130,7 +130,7 @@ def cmd_trace(args) -> int:
     with OutputSet() as outputs:                      # all of them or none; a signal waits for the set
         if args.out:
             outputs.table(branch.table, args.out, meta)
-            branch.save(outputs.stage(files["--out"][2]))
+            branch.save(outputs.stage(files["--out's states"][0]))
         if args.points:
             outputs.table(branch.points, args.points, meta)
         if args.plot:
@@ -157,7 +157,7 @@ def cmd_trace(args) -> int:
 def cmd_fold(args) -> int:
     from snapmem.continuation.folds import fold_curve
     from snapmem.io.results import OutputSet, distinct_outputs, sidecar
-    distinct_outputs({"--out": [args.out, sidecar(args.out)] if args.out else [], "--plot": [args.plot]})
+    distinct_outputs({"--out": [args.out], "--out's parameters": [args.out and sidecar(args.out)], "--plot": [args.plot]})
     params = parse_sets(args.set)
     name, values = parse_axis(args.vary, option="--vary", number=True)
     values = [float(v) for v in values]
@@ -268,7 +268,8 @@ def cmd_hysteresis(args) -> int:
     from snapmem.continuation.hysteresis import hysteresis
     from snapmem.io.results import OutputSet, distinct_outputs, sidecar
     snaps_path = str(Path(args.out).with_suffix("")) + "_snaps.csv" if args.out else None
-    distinct_outputs({"--out": [args.out, sidecar(args.out), snaps_path, sidecar(snaps_path)] if args.out else [],
+    distinct_outputs({"--out": [args.out], "--out's parameters": [args.out and sidecar(args.out)],
+                      "--out's snaps": [snaps_path], "--out's snaps' parameters": [snaps_path and sidecar(snaps_path)],
                       "--plot": [args.plot]})
     params = parse_sets(args.set)
     scene = get_spec(args.scene).build(loads_needed(args.control), **params)
@@ -286,6 +287,9 @@ def cmd_hysteresis(args) -> int:
                             title=f"{scene.name}: hysteresis ({loop.status})")
     print(f"status: {loop.status}")
     for _, row in loop.snaps.iterrows():
+        if not row.get("jumped", True):                # a limit point the state did not jump at: no event
+            print(f"no {row['event']}: the state did not jump at {args.control} = {row['control_at_limit']:.8g}")
+            continue
         print(f"{row['event']}: at {args.control} = {row['control_at_limit']:.8g}, settled at "
               f"{row['control_settled']:.8g}, u_max {row['u_max_before']:.6g} -> {row['u_max_after']:.6g}")
     return 0 if loop.closed else 1
@@ -408,6 +412,11 @@ def main(argv=None) -> int:
         print(f"snapmem: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        print("snapmem: interrupted", file=sys.stderr)
+        return 130
+    except SystemError as exc:              # Ctrl-C inside a compiled kernel comes back as SystemError
+        if not isinstance(exc.__cause__ or exc.__context__, KeyboardInterrupt) or debug:
+            raise
         print("snapmem: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:                 # output piped into head and closed: not an error

@@ -74,13 +74,14 @@ def distinct_outputs(outputs: dict) -> None:
     Parameters
     ----------
     outputs : dict
-        Option (e.g. '--out') -> list of the files it writes (a table and its JSON sidecar, ...).
+        What writes the file (e.g. '--out', "--out's parameters") -> list of paths (None and ''
+        are skipped: an output not asked for).
     """
     from snapmem.errors import SnapmemError
     seen = {}
     for option, paths in outputs.items():
         for path in paths:
-            if path is None:
+            if not path:
                 continue
             real = os.path.realpath(os.fspath(path))
             if real in seen:

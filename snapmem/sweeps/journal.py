@@ -284,7 +284,8 @@ def grid_difference(old: dict, new: dict) -> str:
         return f"{len(a)} designs there, {len(b)} here"
     i = next(i for i, (x, y) in enumerate(zip(a, b)) if x != y)
     there, here = (dict(zip(g["names"], g["values"][i])) for g in (old, new))
-    return f"design {i} is {there} there, {here} here (1 and 1.0 are different values)"
+    note = " (0 and 0.0 are different values: write the grid as it was)" if there == here else ""
+    return f"design {i} is {there} there, {here} here{note}"
 
 
 def write_meta(path, meta: dict):
