@@ -19,7 +19,7 @@ from snapmem.catalog.scenes import SCENES, get_spec
 from snapmem.continuation import CONTROLS
 from snapmem.dynamics import SCHEMES
 from snapmem.errors import SnapmemError, SolverError
-from snapmem.io.interrupts import sigterm_as_interrupt
+from snapmem.io.interrupts import HeldInterrupts, sigterm_as_interrupt
 from snapmem.io.progress import Progress, bar
 from snapmem.sweeps.grid import parse_axis, parse_value
 
@@ -91,6 +91,21 @@ def trace_outputs(out, points, plot) -> dict:
     return files
 
 
+def _stop_when_interrupted(held):
+    """A trace event that ends the branch after the step on which SIGINT or SIGTERM came
+    (``held``: a :class:`~snapmem.io.interrupts.HeldInterrupts`), so the branch so far is kept."""
+    from snapmem.continuation import Outcome
+    from snapmem.continuation.events import Event, Found, Stop
+
+    class Interrupted(Event):
+        def check(self, step):
+            if held.received is not None:
+                return Found(stop=Stop(Outcome.STOPPED, f"interrupted after {len(step.points)} points"))
+            return None
+
+    return Interrupted()
+
+
 def cmd_trace(args) -> int:
     from snapmem.continuation import ContinuationOptions, Outcome, load_points, trace
     from snapmem.io.results import OutputSet
@@ -123,7 +138,9 @@ def cmd_trace(args) -> int:
         display.show(f"trace {scene.name}: step {counter['n']}  {control} = {point.lam:.6g} "
                      f"[{display.elapsed:.1f} s]")
 
-    branch = trace(scene, control, until=until, options=options, start=start, progress=progress)
+    with HeldInterrupts() as held:                     # Ctrl-C / SIGTERM end the branch, which is kept
+        branch = trace(scene, control, until=until, options=options, start=start, progress=progress,
+                       events=[_stop_when_interrupted(held)])
     display.close()
     meta = {"command": "trace", "scene": scene.name, "parameters": scene.parameters, "control": control,
             "until": until, "status": branch.status, "stats": branch.stats}
@@ -147,6 +164,8 @@ def cmd_trace(args) -> int:
               f"stretch_max = {row['stretch_max']:.6g}  located = {row['located']}")
     if branch.points.empty:
         print("no critical points")
+    if held.received is not None:
+        raise KeyboardInterrupt                        # exit 130, after the branch so far is written
     done = branch.outcome is Outcome.TARGET_REACHED or (branch.outcome is Outcome.FIRST_LIMIT
                                                          and args.stop_at_first_limit)
     if not done:                                       # exit 1: distinguishable from success

@@ -9,7 +9,7 @@ happened and a hysteresis loop "closed" with no jump; "converged" was printed be
 unreachable or NaN ``--until`` ended with exit 0; a user's law with wrong derivatives gave a
 "converged" state that is not an equilibrium. The exit codes are documented in the README.
 
-On ed30f81, 27 of these 29 tests fail; the two that pass there are controls that must keep
+On ed30f81, 28 of these 30 tests fail; the two that pass there are controls that must keep
 passing: a file with a complete non-sweep header (``{"a": 1}\n``) was already refused, and a
 trace's outputs without collisions are all written (``test_trace_writes_its_outputs_as_a_set``).
 """
@@ -147,6 +147,32 @@ def test_interrupt_inside_a_compiled_kernel_keeps_the_frames():
     assert traj.meta["interrupted"] is True and traj.meta["status"].startswith("interrupted at t = ")
     assert 3 <= traj.meta["steps"] <= 4 and len(traj["t"]) >= 2
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler          # handlers restored
+
+
+def test_interrupted_trace_writes_the_branch_so_far(tmp_path):
+    """Failed on ed30f81: Ctrl-C during a trace lost the whole branch."""
+    import pandas as pd
+    master, slave = pty.openpty()
+    run = subprocess.Popen([sys.executable, "-m", "snapmem.cli", "trace", "balloon", "--set", "nodes=301",
+                            "--until", "stretch=1e6", "--max-steps", "100000", "--out", "b.csv", "--points", "p.csv"],
+                           cwd=tmp_path, env=ENV, stdout=subprocess.PIPE, stderr=slave, text=True)
+    os.close(slave)
+    try:
+        text, deadline = "", time.monotonic() + 90
+        while not any(int(n) >= 5 for n in re.findall(r"step (\d+) ", text)) and time.monotonic() < deadline:
+            if select.select([master], [], [], 0.5)[0]:
+                text += os.read(master, 4096).decode(errors="replace")
+        run.send_signal(signal.SIGINT)
+        stdout, _ = run.communicate(timeout=60)
+    finally:
+        os.close(master)
+        if run.poll() is None:
+            run.kill()
+    assert run.returncode == 130, stdout
+    assert "status: interrupted after" in stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.csv", "b.csv.json", "b.npz", "p.csv", "p.csv.json"]
+    assert len(pd.read_csv(tmp_path / "b.csv")) >= 5
+    assert len(np.load(tmp_path / "b.npz")["lam"]) == len(pd.read_csv(tmp_path / "b.csv"))
 
 
 # ------------------------------------------------------------------------------------------
