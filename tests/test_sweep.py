@@ -251,3 +251,20 @@ def test_resume_refuses_other_fixed_parameters(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "was written with fixed = {'nodes': '11'}" in err and "{'nodes': '13'}" in err
     assert main([*args, "--set", "nodes=11"]) == 0                    # the same settings resume
+
+
+def test_a_journal_of_an_older_snapmem_resumes_with_its_rows_checked(tmp_path):
+    """Before the grid was recorded the metadata lived in ``r.sweep.json`` (shared by r.csv and r):
+    such a journal resumes, each of its rows checked against the grid, and gets its own file."""
+    import json
+    out = tmp_path / "r.csv"
+    first = sweep(lambda d: {"y": 2 * d["a"]}, {"a": [1, 2]}, out, workers=1, progress=False)
+    meta = json.loads(Path(str(out) + ".sweep.json").read_text())
+    Path(str(out) + ".sweep.json").unlink()
+    (tmp_path / "r.sweep.json").write_text(json.dumps({k: v for k, v in meta.items() if k != "grid"}))
+    lines = out.read_bytes().split(b"\n")
+    out.write_bytes(b"\n".join(lines[:2]) + b"\n")                   # design 1 still to run
+    table = sweep(lambda d: {"y": 2 * d["a"]}, {"a": [1, 2]}, out, workers=1, progress=False,
+                  meta={k: v for k, v in meta.items() if k != "grid"})
+    assert table.equals(first)
+    assert json.loads(Path(str(out) + ".sweep.json").read_text())["grid"]["keys"] == meta["grid"]["keys"]

@@ -28,7 +28,8 @@ def _main_thread() -> bool:
 class HeldInterrupts:
     """Within the block, SIGINT and SIGTERM are noted, not raised; a second one raises at once.
 
-    Outside the main thread (where handlers cannot be set) it does nothing.
+    Outside the main thread (where handlers cannot be set) it does nothing, and a signal the
+    process ignores (a sweep's worker ignores SIGINT: its parent handles it) stays ignored.
 
     Attributes
     ----------
@@ -48,6 +49,8 @@ class HeldInterrupts:
     def __enter__(self) -> "HeldInterrupts":
         if _main_thread():
             for sig in SIGNALS:
+                if signal.getsignal(sig) is signal.SIG_IGN:     # ignored here (a sweep's worker): stays so
+                    continue
                 self._previous[sig] = signal.signal(sig, self._handler)
         return self
 
