@@ -21,6 +21,7 @@ from snapmem.catalog.scenes import SCENES, get_spec
 from snapmem.continuation import CONTROLS
 from snapmem.dynamics import SCHEMES
 from snapmem.errors import FIGURE_SUFFIXES, SnapmemError, SolverError, check_int, check_output, check_real, parse_number
+from snapmem.io.interrupts import HeldInterrupts, sigterm_as_interrupt
 from snapmem.io.progress import Progress, bar
 from snapmem.model.parameters import check_memory
 from snapmem.sweeps.grid import parse_axis, parse_value
@@ -121,12 +122,41 @@ def parse_until(pairs: list[str]) -> dict:
             out[name] = float(value)
         except ValueError:
             raise SnapmemError(f"--until {name}={value!r}: the value must be a number") from None
+        if not np.isfinite(out[name]):
+            raise SnapmemError(f"--until {name}={value!r}: the value must be a finite number (a target the "
+                               "branch can reach)")
     return out
 
 
+def trace_outputs(out, points, plot) -> dict:
+    """The files ``snapmem trace`` writes, by option; SnapmemError if two are the same file."""
+    from snapmem.io.results import distinct_outputs, sidecar
+    files = {"--out": [out], "--out's parameters": [out and sidecar(out)],
+             "--out's states": [out and Path(out).with_suffix(".npz")],
+             "--points": [points], "--points' parameters": [points and sidecar(points)], "--plot": [plot]}
+    distinct_outputs(files)
+    return files
+
+
+def _stop_when_interrupted(held):
+    """A trace event that ends the branch after the step on which SIGINT or SIGTERM came
+    (``held``: a :class:`~snapmem.io.interrupts.HeldInterrupts`), so the branch so far is kept."""
+    from snapmem.continuation import Outcome
+    from snapmem.continuation.events import Event, Found, Stop
+
+    class Interrupted(Event):
+        def check(self, step):
+            if held.received is not None:
+                return Found(stop=Stop(Outcome.STOPPED, f"interrupted after {len(step.points)} points"))
+            return None
+
+    return Interrupted()
+
+
 def cmd_trace(args) -> int:
-    from snapmem.continuation import ContinuationOptions, load_points, trace
-    from snapmem.io.results import write_table
+    from snapmem.continuation import ContinuationOptions, Outcome, load_points, trace
+    from snapmem.io.results import OutputSet
+    files = trace_outputs(args.out, args.points, args.plot)
     params = parse_sets(args.set)
     control = args.control
     scene = get_spec(args.scene).build(loads_needed(control), **params)
@@ -159,22 +189,26 @@ def cmd_trace(args) -> int:
 
     if args.switch:
         return _trace_switch(args, scene, control, until, options)
-    branch = trace(scene, control, until=until, options=options, start=start, progress=progress)
+    with HeldInterrupts() as held:                     # Ctrl-C / SIGTERM end the branch, which is kept
+        branch = trace(scene, control, until=until, options=options, start=start, progress=progress,
+                       events=[_stop_when_interrupted(held)])
     display.close()
     if args.sensitivity:
         branch.points = _sensitivities(branch, args.scene, params, control, args.sensitivity)
     meta = {"command": "trace", "scene": scene.name, "parameters": scene.parameters, "control": control,
             "until": until, "status": branch.status, "stats": branch.stats}
-    if args.out:
-        write_table(branch.table, args.out, meta)
-        branch.save(str(Path(args.out).with_suffix(".npz")))
-    if args.points:
-        write_table(branch.points, args.points, meta)
-    if args.plot:
-        from snapmem.viz.plotting import plot_branch
-        x = args.x or next(iter(scene.probes), "u_max")
-        plot_branch(branch.table, x, control if control != "volume" else "pressure", path=args.plot,
-                    title=f"{scene.name}: {branch.status}", control=control, si=scene.mu != 1.0)
+    with OutputSet() as outputs:                      # all of them or none; a signal waits for the set
+        if args.out:
+            outputs.table(branch.table, args.out, meta)
+            branch.save(outputs.stage(files["--out's states"][0]))
+        if args.points:
+            outputs.table(branch.points, args.points, meta)
+        if args.plot:
+            from snapmem.viz.plotting import plot_branch
+            x = args.x or next(iter(scene.probes), "u_max")
+            plot_branch(branch.table, x, control if control != "volume" else "pressure", path=outputs.stage(args.plot),
+                        title=f"{scene.name}: {branch.status}", control=control,
+                        si=scene.mu != 1.0)
     print(f"status: {branch.status}")
     print(f"points: {len(branch.table)}  steps: {branch.stats['steps']}  rejected: {branch.stats['rejected']}  "
           f"newton_iterations: {branch.stats['newton_iterations']}")
@@ -186,7 +220,13 @@ def cmd_trace(args) -> int:
         print("no critical points")
     for column in (c for c in branch.points.columns if c.startswith(f"d{control}_d")):
         print(f"{column}: " + ", ".join(f"{v:.6g}" for v in branch.points[column]))
-    return 0
+    if held.received is not None:
+        raise KeyboardInterrupt                        # exit 130, after the branch so far is written
+    done = branch.outcome is Outcome.TARGET_REACHED or (branch.outcome is Outcome.FIRST_LIMIT
+                                                         and args.stop_at_first_limit)
+    if not done:                                       # exit 1: distinguishable from success
+        print(f"target not reached: {', '.join(f'{k} = {v:g}' for k, v in until.items())} ({branch.status})")
+    return 0 if done else 1
 
 
 def _trace_switch(args, scene, control, until, options) -> int:
@@ -272,7 +312,8 @@ def _sensitivities(branch, scene_name: str, params: dict, control: str, names: s
 
 def cmd_fold(args) -> int:
     from snapmem.continuation.folds import fold_curve
-    from snapmem.io.results import write_table
+    from snapmem.io.results import OutputSet, distinct_outputs, sidecar
+    distinct_outputs({"--out": [args.out], "--out's parameters": [args.out and sidecar(args.out)], "--plot": [args.plot]})
     params = parse_sets(args.set)
     name, values = parse_axis(args.vary, option="--vary", number=True)
     values = [float(v) for v in values]
@@ -289,12 +330,13 @@ def cmd_fold(args) -> int:
         _fold_points(scene_at, values, folds, args, name, params)
     table = table.rename(columns={"value": name, "limit": f"{args.control}_limit"})
     meta = {"command": "fold", "scene": args.scene, "parameters": params, "vary": name, "control": args.control}
-    if args.out:
-        write_table(table, args.out, meta)
-    if args.plot:
-        from snapmem.viz.plotting import plot_xy
-        plot_xy(table, name, f"{args.control}_limit", args.plot, title=f"{args.scene}: limit points",
-                si=spec.build(with_loads, **{**params, name: values[0]}).mu != 1.0)
+    with OutputSet() as outputs:
+        if args.out:
+            outputs.table(table, args.out, meta)
+        if args.plot:
+            from snapmem.viz.plotting import plot_xy
+            plot_xy(table, name, f"{args.control}_limit", outputs.stage(args.plot), title=f"{args.scene}: limit points",
+                    si=spec.build(with_loads, **{**params, name: values[0]}).mu != 1.0)
     with pd.option_context("display.width", 200, "display.max_columns", 12):
         shown = [c for c in (name, f"{args.control}_limit", "exists", "method", "iterations", "u_max", "status")
                  if c in table.columns]
@@ -343,6 +385,10 @@ def cmd_simulate(args) -> int:
     import dataclasses
     from snapmem.catalog.robots import EXPERIMENTS, events, experiment
     from snapmem.dynamics.driver import simulate
+    from snapmem.io.results import OutputSet
+    out = None
+    if args.out:                                       # the name Trajectory.save writes ('.npz' appended if missing)
+        out = Path(args.out) if Path(args.out).suffix == ".npz" else Path(args.out + ".npz")
     params = parse_sets(args.set)
     if "name" in params:
         raise SnapmemError(f"--set name={params['name']}: the scene is named by the command's scene argument "
@@ -387,10 +433,16 @@ def cmd_simulate(args) -> int:
             lines[f"final_{key}"] = float(traj[key][-1])
     if args.scene in EXPERIMENTS and meta["status"] == "completed" and len(traj["t"]) >= 2:
         lines.update({f"event_{k}": v for k, v in events(traj).items()})     # snap times, ball heights, ...
+    if meta.get("interrupted"):
+        lines["status"] = f"interrupted ({meta['status']})"
     for name, value in lines.items():
         print(f"{name}: {value:.6g}" if isinstance(value, float) else f"{name}: {value}")
-    if args.out:
-        print(f"saved: {traj.save(args.out)}")
+    if out is not None:                                # the frames so far, also when interrupted
+        with OutputSet() as outputs:
+            traj.save(outputs.stage(out))
+        print(f"saved: {out}")
+    if meta.get("interrupted"):
+        raise KeyboardInterrupt                        # exit 130, after the frames are saved
     return 0 if meta["status"] == "completed" else 1
 
 
@@ -417,23 +469,31 @@ def cmd_export(args) -> int:
 
 def cmd_hysteresis(args) -> int:
     from snapmem.continuation.hysteresis import hysteresis
-    from snapmem.io.results import write_table
+    from snapmem.io.results import OutputSet, distinct_outputs, sidecar
+    snaps_path = str(Path(args.out).with_suffix("")) + "_snaps.csv" if args.out else None
+    distinct_outputs({"--out": [args.out], "--out's parameters": [args.out and sidecar(args.out)],
+                      "--out's snaps": [snaps_path], "--out's snaps' parameters": [snaps_path and sidecar(snaps_path)],
+                      "--plot": [args.plot]})
     params = parse_sets(args.set)
     scene = get_spec(args.scene).build(loads_needed(args.control), **params)
     peak = None if args.peak is None else check_real("--peak", args.peak, minimum=-1e30, maximum=1e30)
     loop = hysteresis(scene, args.control, peak=peak)
     meta = {"command": "hysteresis", "scene": scene.name, "parameters": scene.parameters, "control": args.control,
             "status": loop.status}
-    if args.out:
-        write_table(loop.table, args.out, meta)
-        write_table(loop.snaps, str(Path(args.out).with_suffix("")) + "_snaps.csv", meta)
-    if args.plot:
-        from snapmem.viz.plotting import plot_hysteresis
-        x = next(iter(scene.probes), "u_max")
-        plot_hysteresis(loop.table, loop.snaps, x, args.control, args.plot,
-                        title=f"{scene.name}: hysteresis ({loop.status})", si=scene.mu != 1.0)
+    with OutputSet() as outputs:
+        if args.out:
+            outputs.table(loop.table, args.out, meta)
+            outputs.table(loop.snaps, snaps_path, meta)
+        if args.plot:
+            from snapmem.viz.plotting import plot_hysteresis
+            x = next(iter(scene.probes), "u_max")
+            plot_hysteresis(loop.table, loop.snaps, x, args.control, outputs.stage(args.plot),
+                            title=f"{scene.name}: hysteresis ({loop.status})", si=scene.mu != 1.0)
     print(f"status: {loop.status}")
     for _, row in loop.snaps.iterrows():
+        if not row.get("jumped", True):                # a limit point the state did not jump at: no event
+            print(f"no {row['event']}: the state did not jump at {args.control} = {row['control_at_limit']:.8g}")
+            continue
         print(f"{row['event']}: at {args.control} = {row['control_at_limit']:.8g}, settled at "
               f"{row['control_settled']:.8g}, u_max {row['u_max_before']:.6g} -> {row['u_max_after']:.6g}")
     return 0 if loop.closed else 1
@@ -584,13 +644,19 @@ def main(argv=None) -> int:
         check_outputs(args)
         logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                             format="%(levelname)s %(name)s: %(message)s")
-        return args.func(args)
+        with sigterm_as_interrupt():                   # kill PID ends a run as Ctrl-C does: exit 130
+            return args.func(args)
     except (SnapmemError, SolverError) as exc:
         if debug:
             raise
         print(f"snapmem: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        print("snapmem: interrupted", file=sys.stderr)
+        return 130
+    except SystemError as exc:              # Ctrl-C inside a compiled kernel comes back as SystemError
+        if not isinstance(exc.__cause__ or exc.__context__, KeyboardInterrupt) or debug:
+            raise
         print("snapmem: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:                 # output piped into head and closed: not an error

@@ -14,7 +14,7 @@ from typing import Mapping
 from snapmem.continuation.tracer import snap_by_tracing
 from snapmem.model.contact import Contact
 from snapmem.model.scene import Scene
-from snapmem.solvers.newton import Equilibrium, NewtonOptions, solve
+from snapmem.solvers.newton import Equilibrium, NewtonOptions, finite_or_not_converged, solve
 from snapmem.solvers.ramp import LOAD_ORDER, ramp
 from snapmem.threads import single_threaded
 
@@ -31,14 +31,15 @@ def equilibrium(scene: Scene, loads: Mapping[str, float] | None = None,
     predictor. If the increments stall, the path has reached a limit point: the membrane snaps.
     The branch is then traced past the fold (pseudo-arclength) to where the load is back at its
     target; the report's reason says so ('snapped through at pressure = ...'). If that state is
-    not stable, or the branch never returns to the target, the result is not converged.
+    not stable, or the branch never returns to the target, the result is not converged; nor is it
+    where the state or an output is NaN or inf (status ``not_finite``).
 
     With contact, a barrier much thinner than the trace's steps switches on inside one step, and
     the trace past the fold finds no admissible state. Then the barrier width is continued
     instead (:func:`barrier_homotopy`): the equilibrium is found with wider barriers and followed
     as the width shrinks back to the scene's.
     """
-    eq = ramp(scene, loads, options, min_fraction_step, snap=snap_by_tracing)
+    eq = finite_or_not_converged(ramp(scene, loads, options, min_fraction_step, snap=snap_by_tracing))
     if eq.converged or not any(isinstance(t, Contact) for t in scene.terms):
         return eq
     return barrier_homotopy(scene, loads, options, min_fraction_step) or eq
@@ -93,4 +94,4 @@ def barrier_homotopy(scene: Scene, loads: Mapping[str, float] | None, options: N
     final.report.iterations = iterations
     final.report.reason = (f"{final.report.reason}; barrier width continued from {widening:g} x dhat "
                            f"to dhat in {solves} solves")
-    return final
+    return finite_or_not_converged(final)

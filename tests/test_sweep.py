@@ -39,7 +39,13 @@ def uninterrupted(tmp_path_factory):
     stdout, stderr = run.communicate(timeout=120)
     assert run.returncode == 0, stderr
     assert "200 rows; converged 200" in stdout
-    return out.read_bytes()
+    return out.read_bytes(), Path(str(out) + ".sweep.json").read_bytes()
+
+
+def journal(out, rows: bytes, uninterrupted):
+    """Write a journal's rows and its metadata file (the grid and settings it was made with)."""
+    out.write_bytes(rows)
+    Path(str(out) + ".sweep.json").write_bytes(uninterrupted[1])
 
 
 def kill_after(out, rows):
@@ -62,25 +68,44 @@ def test_killed_twice_and_resumed_gives_the_rows_of_an_uninterrupted_run(tmp_pat
     run = snapmem_sweep(out)
     stdout, stderr = run.communicate(timeout=120)
     assert run.returncode == 0, stderr
-    assert out.read_bytes() == uninterrupted           # same rows, same order, same bytes
+    assert out.read_bytes() == uninterrupted[0]        # same rows, same order, same bytes
+
+
+def test_sigterm_stops_a_sweep_as_ctrl_c_does_and_the_rerun_completes_it(tmp_path, uninterrupted):
+    """SIGTERM (kill PID) ends a sweep as Ctrl-C does: exit 130, the rows so far kept, no temporary
+    file; the same command resumes it to the bytes of an uninterrupted run (on ed30f81 SIGTERM
+    ended it with no cleanup, exit -15)."""
+    out = tmp_path / "rows.csv"
+    run = snapmem_sweep(out)
+    deadline = time.monotonic() + 60
+    while rows_in(out) < 20 and run.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.002)
+    run.send_signal(signal.SIGTERM)
+    _, stderr = run.communicate(timeout=60)
+    assert run.returncode == 130 and "interrupted" in stderr, stderr
+    assert 20 <= rows_in(out) < 200
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rows.csv", "rows.csv.sweep.json"]
+    run = snapmem_sweep(out)
+    run.communicate(timeout=120)
+    assert run.returncode == 0 and out.read_bytes() == uninterrupted[0]
 
 
 def test_a_line_cut_short_by_a_kill_is_dropped_and_rerun(tmp_path, uninterrupted):
     out = tmp_path / "rows.csv"
-    lines = uninterrupted.split(b"\n")
-    out.write_bytes(b"\n".join(lines[:120]) + b"\n" + lines[120][:17])     # 119 rows and a partial one
+    lines = uninterrupted[0].split(b"\n")
+    journal(out, b"\n".join(lines[:120]) + b"\n" + lines[120][:17], uninterrupted)     # 119 rows and a partial one
     run = snapmem_sweep(out)
     run.communicate(timeout=120)
     assert run.returncode == 0
-    assert out.read_bytes() == uninterrupted
+    assert out.read_bytes() == uninterrupted[0]
 
 
 def test_a_finished_sweep_reruns_nothing(tmp_path, uninterrupted):
     out = tmp_path / "rows.csv"
-    out.write_bytes(uninterrupted)
+    journal(out, uninterrupted[0], uninterrupted)
     t0 = time.monotonic()
     assert main(["sweep", *GRID, "--out", str(out), "--quiet"]) == 0
-    assert out.read_bytes() == uninterrupted
+    assert out.read_bytes() == uninterrupted[0]
     assert time.monotonic() - t0 < 5
 
 
@@ -90,7 +115,7 @@ def test_dask_local_cluster_gives_the_rows_of_the_local_pool(tmp_path, uninterru
     run = snapmem_sweep(out, "--scheduler", "local")
     stdout, stderr = run.communicate(timeout=180)
     assert run.returncode == 0, stderr
-    assert out.read_bytes() == uninterrupted
+    assert out.read_bytes() == uninterrupted[0]
 
 
 def designs_that_fail(design):
@@ -226,3 +251,20 @@ def test_resume_refuses_other_fixed_parameters(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "was written with fixed = {'nodes': '11'}" in err and "{'nodes': '13'}" in err
     assert main([*args, "--set", "nodes=11"]) == 0                    # the same settings resume
+
+
+def test_a_journal_of_an_older_snapmem_resumes_with_its_rows_checked(tmp_path):
+    """Before the grid was recorded the metadata lived in ``r.sweep.json`` (shared by r.csv and r):
+    such a journal resumes, each of its rows checked against the grid, and gets its own file."""
+    import json
+    out = tmp_path / "r.csv"
+    first = sweep(lambda d: {"y": 2 * d["a"]}, {"a": [1, 2]}, out, workers=1, progress=False)
+    meta = json.loads(Path(str(out) + ".sweep.json").read_text())
+    Path(str(out) + ".sweep.json").unlink()
+    (tmp_path / "r.sweep.json").write_text(json.dumps({k: v for k, v in meta.items() if k != "grid"}))
+    lines = out.read_bytes().split(b"\n")
+    out.write_bytes(b"\n".join(lines[:2]) + b"\n")                   # design 1 still to run
+    table = sweep(lambda d: {"y": 2 * d["a"]}, {"a": [1, 2]}, out, workers=1, progress=False,
+                  meta={k: v for k, v in meta.items() if k != "grid"})
+    assert table.equals(first)
+    assert json.loads(Path(str(out) + ".sweep.json").read_text())["grid"]["keys"] == meta["grid"]["keys"]

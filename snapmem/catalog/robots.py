@@ -24,6 +24,7 @@ fast the ball settles), in ``ball_throw`` not (``damp_ball = 0``: the thrown bal
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -217,6 +218,12 @@ def events(traj: Trajectory) -> dict:
       (fastest fall after it).
     * grippers and torus_snap: ``snap`` (time of the fastest volume change); torus_snap adds
       ``outer_radius`` (final) [m].
+
+    A snap is reported only when it happened (else NaN): the fastest volume change must come
+    with a burst of kinetic energy, over :data:`SNAP_KINETIC_RATIO` times the quietest frame
+    before it, and that quiet frame must come after the start. The response to the loads applied
+    at t = 0 (the pump's voltage: a start-up transient, moving from the first frame on) is not a
+    snap; nor is a membrane that only follows its slowly changing load.
     * ball_drop: ``impact`` (the ball's gap first falls below the barrier width), ``bounce``
       (its first lowest point) and ``rebound`` (the highest point after that) [s], and
       ``rebound_height``, the ball centre's height above the plate there [m].
@@ -225,7 +232,8 @@ def events(traj: Trajectory) -> dict:
       of the membrane's ringing after the snap, which the time step does not decide), ``launch``
       (the ball's gap last rises above the barrier width) [s], and ``ball_apex``, the highest
       point of the ball's free flight above the plate [m] (z + v^2 / 2|g| once it flies: the ball
-      is undamped, so that is exact even where the run ends before the apex).
+      is undamped, so that is exact even where the run ends before the apex; NaN if it never
+      flies).
 
     Times and heights between frames are interpolated (linearly for crossings, by a parabola
     through three frames for extrema), so they resolve well below the frame interval.
@@ -234,19 +242,56 @@ def events(traj: Trajectory) -> dict:
     name = traj.meta.get("scene", "")
     if name in ("ball_drop", "ball_throw"):
         return _ball_events(traj, name)
-    rate = np.diff(volume) / np.maximum(np.diff(t), 1e-300)
-    mid = 0.5 * (t[:-1] + t[1:])
+    kinetic = traj["kinetic"]
     out = {}
     if name == "pump":
         t_down = traj.meta["parameters"]["t_down"]
-        up = mid < t_down
-        out["snap"] = float(mid[up][np.argmax(rate[up])])
-        out["snap_back"] = float(mid[~up][np.argmin(rate[~up])]) if np.any(~up) else float("nan")
+        mid = 0.5 * (t[:-1] + t[1:])
+        out["snap"] = _snap(t, volume, kinetic, mid < t_down, +1)
+        out["snap_back"] = _snap(t, volume, kinetic, mid >= t_down, -1)
     else:
-        out["snap"] = float(mid[np.argmax(np.abs(rate))])
+        out["snap"] = _snap(t, volume, kinetic, np.ones(t.size - 1, dtype=bool), 0)
     if name == "torus_snap":
         out["outer_radius"] = float(traj["r"][-1].max())
     return out
+
+
+#: A snap's kinetic energy is over this many times the median of the frames before it.
+SNAP_KINETIC_RATIO = 100.0
+#: After a snap the volume's rate of change falls below this fraction of its peak (it was a jump).
+SNAP_SETTLE_FRACTION = 0.1
+
+
+def _snap(t, volume, kinetic, intervals, direction: int) -> float:
+    """Midpoint time [s] of the fastest volume change among ``intervals`` (bool, one per pair of
+    frames; growth if ``direction`` > 0, fall if < 0, either if 0), if it is a snap; else NaN.
+
+    A snap is a jump out of a quiet state: (i) frames before it show the state moving slowly
+    (the run's first instant excluded: a run starts from rest, and motion from there on is the
+    response to the loads applied at the start, not a snap); (ii) the kinetic energy at the
+    change (its two frames and the next) exceeds :data:`SNAP_KINETIC_RATIO` times its median over
+    those frames; (iii) the volume's rate falls below :data:`SNAP_SETTLE_FRACTION` of its peak
+    later in the window (a jump that ended, not a run still speeding up at its end).
+    """
+    nan = float("nan")
+    rate = np.diff(volume) / np.maximum(np.diff(t), 1e-300)
+    score = rate * direction if direction else np.abs(rate)
+    where = np.flatnonzero(intervals)
+    if where.size == 0:
+        return nan
+    i = int(where[np.argmax(score[where])])
+    if not score[i] > 0:
+        return nan
+    before = np.arange(where[0], i + 1)
+    before = before[t[before] > t[0]]
+    later = where[where > i]
+    if before.size == 0 or later.size == 0:
+        return nan
+    burst = float(kinetic[i:i + 3].max())
+    jumped = np.abs(rate[later]).min() <= SNAP_SETTLE_FRACTION * abs(rate[i])
+    if burst > SNAP_KINETIC_RATIO * float(np.median(kinetic[before])) and jumped:
+        return float(0.5 * (t[i] + t[i + 1]))
+    return nan
 
 
 def _ball_events(traj: Trajectory, name: str) -> dict:
@@ -264,14 +309,15 @@ def _ball_events(traj: Trajectory, name: str) -> dict:
                 out["rebound"], out["rebound_height"] = high
         return out
     volume = traj["volume"]
-    snap = _crossing(t, volume, float(np.sqrt(volume[0] * volume.max())), falling=False)
+    snapped = math.isfinite(_snap(t, volume, traj["kinetic"], np.ones(t.size - 1, dtype=bool), +1))
+    snap = _crossing(t, volume, float(np.sqrt(volume[0] * volume.max())), falling=False) if snapped else nan
     touching = gap < p["dhat"]
-    out = {"snap": snap, "launch": nan, "ball_apex": float(z.max())}
+    out = {"snap": snap, "launch": nan, "ball_apex": nan}          # no flight, no apex
     if touching.any() and not touching[-1]:
         last = int(np.flatnonzero(touching)[-1])
         out["launch"] = _crossing(t[last:], gap[last:], p["dhat"], falling=False)
         v = traj["ball_v"][-1]
-        out["ball_apex"] = max(out["ball_apex"], float(z[-1] + max(v, 0.0) ** 2 / (2.0 * abs(p["g"]))))
+        out["ball_apex"] = max(float(z[last:].max()), float(z[-1] + max(v, 0.0) ** 2 / (2.0 * abs(p["g"]))))
     return out
 
 

@@ -13,6 +13,7 @@ import logging
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
 import snapmem._lazy as _lazy
 
 pd = _lazy.module("pandas")  # imported at first use (start-up)
@@ -23,6 +24,9 @@ from snapmem.model.scene import Scene
 from snapmem.threads import single_threaded
 
 log = logging.getLogger(__name__)
+
+#: A snap moves some node by more than this fraction of the membrane's size (else it is no snap).
+MIN_JUMP = 1e-3
 
 
 @dataclass
@@ -37,10 +41,13 @@ class Hysteresis:
     snaps : pandas.DataFrame
         One row per snap: ``event`` ('snap' or 'snap back'), the ``control`` value at the limit
         point, the load it settled at, and the measures before and after (``u_max``, ``volume``,
-        the scene's probes), the dynamic ``duration`` [s] and whether it came ``at_rest``.
+        the scene's probes), the dynamic ``duration`` [s], whether it came ``at_rest``, the
+        ``jump`` (largest node displacement from the limit point to the rest state, in the
+        scene's length unit) and whether it ``jumped`` (by over :data:`MIN_JUMP` of the
+        membrane's size: a limit point the state does not jump at is no snap).
     status : str
         'loop closed', or what stopped the loop (no limit point on a branch, a snap that did not
-        come to rest).
+        come to rest, a limit point with no jump).
     closed : bool
         Whether the loop closed: both snaps happened and the unloading came back to the start.
     """
@@ -89,9 +96,13 @@ def hysteresis(scene: Scene, control: str = "pressure", peak: float | None = Non
         target = pb.loads(lp.lam * (1.0 + sign * push))
         before = scene.measures(q, loads)
         rest = settle(scene, q, target, rho=rho, damping=damping, t_max=1e3 * period)
+        if rest.trajectory.meta.get("interrupted"):
+            raise KeyboardInterrupt            # the dynamics held Ctrl-C / SIGTERM until a step ended
         after = scene.measures(rest.q, rest.loads)
+        jump = float(np.max(np.abs(rest.q[:scene.n_node_dofs] - q[:scene.n_node_dofs])))
         row = {"event": event, "control_at_limit": lp.lam, "control_settled": lp.lam * (1.0 + sign * push),
-               "duration": float(rest.trajectory["t"][-1]), "at_rest": rest.at_rest}
+               "duration": float(rest.trajectory["t"][-1]), "at_rest": rest.at_rest, "jump": jump,
+               "jumped": jump > MIN_JUMP * scene.meridian.size}
         row.update({f"{k}_before": v for k, v in before.items() if isinstance(v, float)})
         row.update({f"{k}_after": v for k, v in after.items() if isinstance(v, float)})
         snaps.append(row)
@@ -106,6 +117,8 @@ def hysteresis(scene: Scene, control: str = "pressure", peak: float | None = Non
     rest = snap("snap", loading, +1)
     if not rest.at_rest:
         return Hysteresis(_join(segments), pd.DataFrame(snaps), "the snap did not come to rest")
+    if not snaps[-1]["jumped"]:
+        return Hysteresis(_join(segments), pd.DataFrame(snaps), _no_jump(snaps[-1], control))
     peak = check_real("peak", peak if peak is not None else 1.05 * lam_up)
     after = trace(scene, control, until={control: peak}, start=(rest.q, rest.loads), options=replace(options, direction=1))
     segments.append(after.table.assign(segment="after snap"))
@@ -119,10 +132,17 @@ def hysteresis(scene: Scene, control: str = "pressure", peak: float | None = Non
     back = snap("snap back", down, -1)
     if not back.at_rest:
         return Hysteresis(_join(segments), pd.DataFrame(snaps), "the snap back did not come to rest")
+    if not snaps[-1]["jumped"]:
+        return Hysteresis(_join(segments), pd.DataFrame(snaps), _no_jump(snaps[-1], control))
     home = trace(scene, control, until={control: start}, start=(back.q, back.loads),
                  options=replace(options, direction=-1))
     segments.append(home.table.assign(segment="after snap back"))
     return Hysteresis(_join(segments), pd.DataFrame(snaps), "loop closed", closed=True)
+
+
+def _no_jump(row: dict, control: str) -> str:
+    return (f"the state did not jump at the limit point ({row['event']} at {control} = {row['control_at_limit']:.8g}: "
+            f"largest displacement {row['jump']:.3g}, under {MIN_JUMP:g} of the membrane's size): no snap, no loop")
 
 
 def _join(segments) -> pd.DataFrame:

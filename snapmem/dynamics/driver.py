@@ -26,6 +26,7 @@ from snapmem.dynamics.schemes import SCHEME_BY_NAME
 from snapmem.dynamics.stepper import _Recorder, _Stepper
 from snapmem.dynamics.trajectory import Trajectory
 from snapmem.errors import SolverError, check_real
+from snapmem.io.interrupts import HeldInterrupts
 from snapmem.model.scene import Scene
 from snapmem.threads import single_threaded
 
@@ -80,7 +81,11 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     Trajectory
         ``meta['status']`` is 'completed', or why the run ended early (the step fell below
         ``dt_min``, e.g. where a slack membrane crumples, or ``max_steps``); the frames up to
-        there are kept.
+        there are kept. ``meta['interrupted']`` is True when SIGINT (Ctrl-C) or SIGTERM came:
+        the signal is taken between two steps (never inside a compiled kernel, where it would
+        come back as SystemError), the run stops there with every frame so far, and the caller
+        decides what to do (the command line saves them and exits 130). A second signal stops it
+        at once, the frames so far still kept.
     """
     wall = time.perf_counter()
     t_end = check_real("t_end", t_end)
@@ -122,8 +127,12 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     scheme = SCHEME_BY_NAME[options.scheme]
     length = scene.meridian.size
     breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
+    held = HeldInterrupts().__enter__()                # SIGINT/SIGTERM noted, taken between two steps
     try:
         while t < t_end - 1e-12 * max(1.0, abs(t_end)):
+            if held.received is not None:
+                status = f"interrupted at t = {t:.6g} s"
+                break
             if steps + rejected >= options.max_steps:
                 status = f"max_steps = {options.max_steps} reached at t = {t:.6g} s"
                 break
@@ -193,17 +202,29 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 dt = min(options.dt_max, max(options.dt_min, dt * grow))
             else:
                 dt = options.dt          # a fixed step returns to its size after a cut or a landing on a kink
-    except KeyboardInterrupt:                          # keep what was computed: the frames up to here
+    except (KeyboardInterrupt, SystemError) as exc:    # keep what was computed: the frames up to here
+        if isinstance(exc, SystemError) and held.received is None:
+            held.__exit__(None, None, None)
+            raise                                      # not an interrupt (a second one can land in a kernel)
         status = f"interrupted at t = {t:.6g} s"
-    if status != "completed":
-        log.warning("simulation stopped early: %s", status)
-        recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)
-    elif stop is not None and t < t_end - 1e-12 * max(1.0, abs(t_end)):
-        status = "stopped by the stop condition"
-    meta = {"scene": scene.name, "status": status, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
-            "damping": xi, "steps": steps, "rejected": rejected, "euler_fallbacks": fallbacks, "newton_iterations": iterations, "line_search_cuts": cuts,
-            "wall_time": time.perf_counter() - wall, "t0": t0, "t_end": float(t),
-            "nodes": scene.meridian.nodes, "closed": scene.meridian.closed,
-            "bodies": [b.name for b in scene.bodies], "options": asdict(options)}
-    return recorder.trajectory(meta)
+    except BaseException:
+        held.__exit__(None, None, None)
+        raise
+    try:                                               # held until the frames are whole
+        if status != "completed":
+            log.warning("simulation stopped early: %s", status)
+            recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)
+        elif stop is not None and t < t_end - 1e-12 * max(1.0, abs(t_end)):
+            status = "stopped by the stop condition"
+        meta = {"scene": scene.name, "status": status, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
+                "damping": xi, "steps": steps, "rejected": rejected, "euler_fallbacks": fallbacks, "newton_iterations": iterations, "line_search_cuts": cuts,
+                "wall_time": time.perf_counter() - wall, "t0": t0, "t_end": float(t),
+                "nodes": scene.meridian.nodes, "closed": scene.meridian.closed,
+                "bodies": [b.name for b in scene.bodies], "options": asdict(options),
+                "interrupted": False}
+        trajectory = recorder.trajectory(meta)
+        trajectory.meta["interrupted"] = held.received is not None or status.startswith("interrupted")
+        return trajectory
+    finally:
+        held.__exit__(None, None, None)
 

@@ -20,6 +20,13 @@ check every law take it from there. A law defined outside the package works the 
         parameters = (Parameter("mu", 1.0, "Pa", "shear modulus", minimum=0.0, open_min=True),
                       Parameter("alpha", 2.0, "", "exponent", minimum=0.0, open_min=True))
         def density(self, lam1, lam2): ...
+
+A law defined outside the package has its derivatives checked on first use (per instance):
+W's first and second derivatives against central differences of W and of the first derivatives
+at a few stretches (:data:`CHECK_STRETCHES`, five density calls). Wrong ones raise SnapmemError
+naming the derivative, since a solve would otherwise report "converged" at a state that is not an
+equilibrium. To opt out (a law checked some other way, or too costly to call), set the class
+attribute ``check_derivatives = False``.
 """
 
 from __future__ import annotations
@@ -77,6 +84,16 @@ class Law:
     #: the law's parameters (name, default, unit, doc, allowed range), each a constructor keyword
     parameters: tuple = ()
 
+    #: check a law defined outside snapmem against finite differences on first use (see the module
+    #: docstring); set False on a subclass to opt out
+    check_derivatives: bool = True
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        density = getattr(cls, "density", None)
+        if cls.__module__.split(".")[0] != "snapmem" and density is not None and not getattr(density, "checks_first_use", False):
+            cls.density = _checked_on_first_use(density)
+
     def __post_init__(self):
         """SnapmemError naming the first declared parameter that is not set or out of its range."""
         for p in self.parameters:
@@ -130,6 +147,70 @@ class Law:
     def admissible(self, lam1: np.ndarray, lam2: np.ndarray) -> np.ndarray:
         """Boolean mask (E,) of stretches where W is finite. Default: all positive stretches."""
         return (lam1 > 0) & (lam2 > 0)
+
+
+#: (lam1, lam2) pairs where a user's law is checked on first use (those outside its domain are skipped).
+CHECK_STRETCHES = ((1.0, 1.0), (1.3, 0.9), (0.85, 1.15), (1.6, 1.6), (2.2, 1.4))
+
+
+def check_derivatives(law: Law, density=None, rtol: float = 1e-5, step: float = 1e-4) -> None:
+    """SnapmemError if ``law``'s derivatives disagree with central differences at :data:`CHECK_STRETCHES`.
+
+    Parameters
+    ----------
+    law : Law
+    density : callable (law, lam1, lam2) -> Density, optional
+        The function to check (default ``type(law).density``).
+    rtol : float
+        Allowed difference, relative to the largest derivative at that stretch pair.
+    step : float
+        Central-difference step, relative to the stretch.
+    """
+    density = type(law).density if density is None else density
+    lam = np.array(CHECK_STRETCHES, dtype=float)
+    a, b = lam[:, 0], lam[:, 1]
+    h = step * lam
+    inside = np.ones(len(lam), dtype=bool)
+    for da, db in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
+        inside &= np.asarray(law.admissible(a + da * h[:, 0], b + db * h[:, 1]), dtype=bool)
+    if not inside.any():
+        return
+    a, b, h1, h2 = a[inside], b[inside], h[inside, 0], h[inside, 1]
+    d = density(law, a.copy(), b.copy())
+    p1, m1 = density(law, a + h1, b.copy()), density(law, a - h1, b.copy())
+    p2, m2 = density(law, a.copy(), b + h2), density(law, a.copy(), b - h2)
+    checks = (("dW/dlam1", d.w1, (p1.w - m1.w) / (2 * h1), "W"),
+              ("dW/dlam2", d.w2, (p2.w - m2.w) / (2 * h2), "W"),
+              ("d2W/dlam1^2", d.w11, (p1.w1 - m1.w1) / (2 * h1), "dW/dlam1"),
+              ("d2W/dlam1 dlam2", d.w12, (p2.w1 - m2.w1) / (2 * h2), "dW/dlam1"),
+              ("d2W/dlam1 dlam2", d.w12, (p1.w2 - m1.w2) / (2 * h1), "dW/dlam2"),
+              ("d2W/dlam2^2", d.w22, (p2.w2 - m2.w2) / (2 * h2), "dW/dlam2"))
+    given = [np.broadcast_to(np.asarray(c[1], dtype=float), a.shape) for c in checks]
+    scale = np.max(np.abs(np.array(given)), axis=0) + np.finfo(float).tiny
+    for (name, _, fd, of), value in zip(checks, given):
+        err = np.abs(value - fd) / scale
+        if not np.all(err <= rtol):                  # NaN fails too
+            i = int(np.argmax(np.where(np.isfinite(err), err, np.inf)))
+            raise SnapmemError(
+                f"law {type(law).__name__}: {name} = {value[i]:.6g} at (lam1, lam2) = ({a[i]:g}, {b[i]:g}), but finite "
+                f"differences of {of} give {fd[i]:.6g} (difference {err[i]:.2g} of its largest derivative there): "
+                "its density returns wrong derivatives, and a solve would report converged at a state that is not "
+                "an equilibrium; fix them, or set check_derivatives = False on the class to skip this check")
+
+
+def _checked_on_first_use(density):
+    """``density`` that checks the law's derivatives the first time an instance is used."""
+    def checked(self, lam1, lam2):
+        if type(self).check_derivatives and not getattr(self, "_derivatives_checked", False):
+            check_derivatives(self, density)
+            try:
+                object.__setattr__(self, "_derivatives_checked", True)     # frozen dataclasses too
+            except AttributeError:                                     # __slots__: checked at every call
+                pass
+        return density(self, lam1, lam2)
+    checked.checks_first_use = True
+    checked.__doc__, checked.__name__, checked.__qualname__ = density.__doc__, density.__name__, density.__qualname__
+    return checked
 
 
 def _full(x, like: np.ndarray) -> np.ndarray:

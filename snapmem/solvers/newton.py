@@ -196,6 +196,26 @@ class Equilibrium:
         return self.scene.measures(self.q, self.loads)
 
 
+def finite_or_not_converged(eq: Equilibrium) -> Equilibrium:
+    """A converged equilibrium has a finite state and finite outputs: otherwise it is not converged.
+
+    ``eq.report`` becomes ``not_finite`` (converged False) if the state or any of the scene's
+    measures at it (volume, u_max, forces, probes) is NaN or inf, its reason naming them; ``eq``
+    is returned.
+    """
+    report = eq.report
+    if not report.converged:
+        return eq
+    bad = [] if np.all(np.isfinite(eq.q)) else ["the state"]
+    if not bad:
+        bad = [name for name, value in eq.measures().items()
+               if isinstance(value, (float, np.floating)) and not math.isfinite(value)]
+    if bad:
+        report.converged, report.status = False, Status.not_finite
+        report.reason = f"the residual is below the tolerance, but {', '.join(bad)} not finite (NaN or inf)"
+    return eq
+
+
 def solve(scene: Scene, loads: Mapping[str, float] | None = None, q0: np.ndarray | None = None,
           options: NewtonOptions = NewtonOptions()) -> Equilibrium:
     """Newton solve of the scene's equilibrium at ``loads`` from ``q0`` (default: its start guess)."""
@@ -206,7 +226,7 @@ def solve(scene: Scene, loads: Mapping[str, float] | None = None, q0: np.ndarray
         q0 = check_array("q0", q0, scene.reference_state().shape)
     q, ev, report = newton(lambda x: scene.evaluate(x, loads, order=2), q0, scene.free,
                            options.tol * scene.force_scale, options, scene.inadmissible, scene.max_step)
-    return Equilibrium(scene, q, loads, report, None if ev is None else ev.stiffness)
+    return finite_or_not_converged(Equilibrium(scene, q, loads, report, None if ev is None else ev.stiffness))
 
 
 def start_guess(scene: Scene, loads: Mapping[str, float]) -> np.ndarray:

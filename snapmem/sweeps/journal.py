@@ -2,8 +2,11 @@
 
 The file is append-only while the sweep runs (each row flushed and fsynced at once), repaired
 after a kill (a last line cut short is dropped), locked against a second sweep writing to it, and
-rewritten in design order when every design is done. ``<out>.sweep.json`` keeps what the rows
-depend on besides the design; resuming with a different one is refused.
+rewritten in design order when every design is done. ``<out>.sweep.json`` (one per output file:
+``r.csv.sweep.json`` beside ``r.csv``) keeps what the rows depend on besides the design and the
+whole grid (every design's values and key, in order); resuming with other settings or another
+grid is refused, and so is a file whose rows are not this grid's (edited, duplicated) or that is
+no sweep's journal at all, before anything in it is changed.
 """
 
 from __future__ import annotations
@@ -42,11 +45,36 @@ def cell(value) -> str:
 
 class RowFile:
     """The CSV of a sweep: append-only while it runs, repaired after a kill, locked against a
-    second sweep writing to it at the same time."""
+    second sweep writing to it at the same time, and checked against its grid.
 
-    def __init__(self, path, names: list[str]):
+    An existing file is taken as this sweep's journal only if its header is this sweep's, its
+    metadata file (:func:`meta_path`) holds the same ``meta`` and the same grid (every design's
+    values, in order), and every row is a design of that grid with the parameters the grid gives
+    it, each design at most once. Anything else is refused (SnapmemError) before the file is
+    touched; only then is a last line cut short by a kill dropped.
+
+    Parameters
+    ----------
+    path : path
+        The CSV file.
+    names : list of str
+        The designs' parameter names (columns after ``design`` and ``key``).
+    designs : list of dict
+        Every design of the grid, in order.
+    keys : list of str
+        Their keys (:func:`snapmem.sweeps.grid.design_key`).
+    meta : dict
+        What the rows depend on besides the design (job, scene, fixed parameters).
+    """
+
+    def __init__(self, path, names: list[str], designs: list[dict] | None = None, keys: list[str] | None = None,
+                 meta: dict | None = None):
         self.path = os.fspath(path)
         self.names = names
+        self.designs = designs
+        self.keys = keys
+        self.index = None if keys is None else {key: i for i, key in enumerate(keys)}
+        self.meta = None if meta is None else json.loads(json.dumps({**meta, "grid": grid_record(names, designs, keys)}))
         self.outputs = None              # output column names, once the header is known
         self.done = {}                   # key -> design index of rows already in the file
         folder = os.path.dirname(os.path.abspath(self.path))
@@ -54,6 +82,7 @@ class RowFile:
             raise SnapmemError(f"out = {self.path!r}: folder {folder!r} does not exist")
         if os.path.isdir(self.path):
             raise SnapmemError(f"out = {self.path!r}: is a folder, must be a CSV file")
+        existed = os.path.exists(self.path)
         try:
             self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
@@ -70,7 +99,13 @@ class RowFile:
             self._read()
         except BaseException:
             os.close(self.fd)
+            if not existed and os.path.exists(self.path) and os.path.getsize(self.path) == 0:
+                os.unlink(self.path)     # refused before anything was written: leave no empty file
             raise
+
+    def _refuse(self, why: str):
+        raise SnapmemError(f"out = {self.path!r}: {why}; the file is left as it was: choose a new file, "
+                           "or resume with the command that made it")
 
     def _read(self):
         data = b""
@@ -79,30 +114,89 @@ class RowFile:
             if not chunk:
                 break
             data += chunk
-        if data and not data.endswith(b"\n"):         # a line cut short by a kill: drop it
-            keep = data.rfind(b"\n") + 1
-            log.warning("%s: dropped a partial last line (%d bytes) left by an interrupted sweep",
-                        self.path, len(data) - keep)
-            os.ftruncate(self.fd, keep)
-            os.fsync(self.fd)
-            data = data[:keep]
-        if not data:
+        if not data:                                  # a new sweep
+            if self.meta is not None:
+                write_meta(self.path, self.meta)
             return
+        # everything is checked before the file is touched: a file that is not this sweep's own
+        # journal stays byte for byte as it was
+        end = data.find(b"\n")
+        if end < 0:
+            self._refuse("is not a sweep's CSV (no complete first line)")
         try:
-            rows = list(csv.reader(io.StringIO(data.decode("utf-8"))))
+            text = data[:data.rfind(b"\n") + 1].decode("utf-8")
+            rows = list(csv.reader(io.StringIO(text)))
         except (UnicodeDecodeError, csv.Error) as exc:
-            raise SnapmemError(f"out = {self.path!r}: not a sweep CSV ({exc})") from None
+            self._refuse(f"is not a sweep's CSV ({exc})")
         header = rows[0]
         head = [*LEADING, *self.names, "status"]
         if header[:len(head)] != head or header[-1:] != ["message"]:
             raise SnapmemError(f"out = {self.path!r}: has columns {', '.join(header)}; this sweep writes "
-                               f"{', '.join(head)}, ..., message: resume with the same grid or choose a new file")
+                               f"{', '.join(head)}, ..., message: resume with the same grid or choose a new file "
+                               "(the file is left as it was)")
+        if self.meta is not None:
+            self._check_meta()
         self.outputs = header[len(head):-1]
+        lines = {}
         for line, row in enumerate(rows[1:], start=2):
             if len(row) != len(header):
                 raise SnapmemError(f"out = {self.path!r}: line {line} has {len(row)} fields, the header "
                                    f"{len(header)}: the file is damaged; repair or remove that line")
-            self.done.setdefault(row[1], row[0])
+            key = row[1]
+            if key in lines:
+                raise SnapmemError(f"out = {self.path!r}: design {row[0]} (key {key}) is there twice, lines "
+                                   f"{lines[key]} and {line}: the file is damaged; remove one of them")
+            lines[key] = line
+            if self.index is not None:
+                self._check_row(line, row)
+            self.done[key] = row[0]
+        if not data.endswith(b"\n"):                 # a line cut short by a kill: drop it, now that
+            keep = data.rfind(b"\n") + 1             # the file is known to be this sweep's
+            log.warning("%s: dropped a partial last line (%d bytes) left by an interrupted sweep",
+                        self.path, len(data) - keep)
+            os.ftruncate(self.fd, keep)
+            os.fsync(self.fd)
+
+    def _check_row(self, line: int, row: list[str]):
+        """A row must be a design of this grid, numbered as the grid numbers it, with its parameters."""
+        key = row[1]
+        if key not in self.index:
+            raise SnapmemError(f"out = {self.path!r}: line {line}: key {key!r} is no design of this grid: the row "
+                               "was edited or comes from another sweep; remove it")
+        i = self.index[key]
+        expected = [str(i), key, *(cell(self.designs[i][n]) for n in self.names)]
+        if row[:len(expected)] != expected:
+            got = dict(zip([*LEADING, *self.names], row))
+            want = dict(zip([*LEADING, *self.names], expected))
+            diff = ", ".join(f"{k} = {got[k]!r} (the grid's {want[k]!r})" for k in want if got[k] != want[k])
+            raise SnapmemError(f"out = {self.path!r}: line {line} was edited: {diff}; remove it or restore it")
+
+    def _check_meta(self):
+        side = meta_path(self.path)
+        legacy = os.path.splitext(self.path)[0] + ".sweep.json"      # where snapmem < 0.13 kept it
+        source = side if os.path.exists(side) else legacy if os.path.exists(legacy) else None
+        if source is None:
+            self._refuse(f"has no {os.path.basename(side)} beside it, so it is no journal of a sweep")
+        try:
+            with open(source, encoding="utf-8") as f:
+                old = json.load(f)
+        except (OSError, ValueError) as exc:
+            self._refuse(f"{source} cannot be read ({exc})")
+        if not isinstance(old, dict):
+            self._refuse(f"{source} is not a sweep's metadata")
+        meta = self.meta
+        if "grid" not in old:                        # an older journal: its rows are checked one by one
+            meta = {k: v for k, v in meta.items() if k != "grid"}
+        if old != meta:
+            changed = sorted(k for k in set(old) | set(meta) if old.get(k) != meta.get(k) and k != "grid")
+            if changed:
+                raise SnapmemError(f"out = {self.path!r}: was written with {', '.join(f'{k} = {old.get(k)!r}' for k in changed)}; "
+                                   f"this sweep has {', '.join(f'{k} = {meta.get(k)!r}' for k in changed)}: "
+                                   "resume with the same settings or choose a new file")
+            raise SnapmemError(f"out = {self.path!r}: was written for another grid ({grid_difference(old['grid'], meta['grid'])}): "
+                               "resume with the same --grid (values and order) or choose a new file")
+        if source != side:
+            write_meta(self.path, self.meta)
 
     @property
     def header(self) -> list[str]:
@@ -143,11 +237,15 @@ class RowFile:
             return
         rows[1:] = sorted(rows[1:], key=lambda row: (int(row[0]), row[1]))
         tmp = self.path + ".tmp"
-        with open(tmp, "w", newline="", encoding="utf-8") as f:
-            csv.writer(f, lineterminator="\n").writerows(rows)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, self.path)
+        try:
+            with open(tmp, "w", newline="", encoding="utf-8") as f:
+                csv.writer(f, lineterminator="\n").writerows(rows)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, self.path)
+        finally:
+            if os.path.exists(tmp):                  # interrupted before the rename: the old file is whole
+                os.unlink(tmp)
         _fsync_folder(self.path)
 
     def close(self):
@@ -167,28 +265,42 @@ def _fsync_folder(path):
         os.close(fd)
 
 
-def check_meta(path: str, meta: dict, fresh: bool):
-    """Write ``meta`` beside a new sweep file; refuse to resume one whose meta differs."""
-    side = os.path.splitext(path)[0] + ".sweep.json"
-    if not fresh and os.path.exists(side):
-        try:
-            with open(side, encoding="utf-8") as f:
-                old = json.load(f)
-        except (OSError, ValueError):
-            old = None
-        if old is not None and old != meta:
-            changed = sorted(k for k in set(old) | set(meta) if old.get(k) != meta.get(k))
-            raise SnapmemError(f"out = {path!r}: was written with {', '.join(f'{k} = {old.get(k)!r}' for k in changed)}; "
-                               f"this sweep has {', '.join(f'{k} = {meta.get(k)!r}' for k in changed)}: "
-                               "resume with the same settings or choose a new file")
-        if old is not None:
-            return
+def meta_path(path) -> str:
+    """The metadata file of the sweep CSV ``path``: ``path`` + '.sweep.json' (one per output file)."""
+    return os.fspath(path) + ".sweep.json"
+
+
+def grid_record(names, designs, keys) -> dict | None:
+    """The whole grid as the metadata keeps it: parameter names, every design's values and key, in order."""
+    if designs is None:
+        return None
+    return {"names": list(names), "values": [[d[n] for n in names] for d in designs], "keys": list(keys)}
+
+
+def grid_difference(old: dict, new: dict) -> str:
+    """Where two grid records first differ, in words."""
+    a, b = old.get("keys", []), new.get("keys", [])
+    if len(a) != len(b):
+        return f"{len(a)} designs there, {len(b)} here"
+    i = next(i for i, (x, y) in enumerate(zip(a, b)) if x != y)
+    there, here = (dict(zip(g["names"], g["values"][i])) for g in (old, new))
+    note = " (0 and 0.0 are different values: write the grid as it was)" if there == here else ""
+    return f"design {i} is {there} there, {here} here{note}"
+
+
+def write_meta(path, meta: dict):
+    """Write a sweep's metadata beside its CSV ``path`` (atomically)."""
+    side = meta_path(path)
     tmp = side + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as f:
-        json.dump(meta, f, indent=1, sort_keys=True)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, side)
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(meta, f, indent=1, sort_keys=True)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, side)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def read_rows(path):

@@ -38,7 +38,7 @@ from snapmem.errors import SnapmemError, check_int, check_real
 from snapmem.io.progress import Progress as _Display
 from snapmem.io.progress import bar, duration
 from snapmem.sweeps.grid import RESERVED, design_key, designs_of, parse_axis, parse_value, product_grid
-from snapmem.sweeps.journal import RowFile, check_meta, read_rows
+from snapmem.sweeps.journal import RowFile, read_rows
 from snapmem.sweeps.runners import FAILED, ROW_STATUSES, check_scheduler, run_dask, run_pool
 
 __all__ = ["sweep", "Progress", "EquilibriumJob", "equilibrium_job", "JOBS", "register_job", "make_job",
@@ -121,8 +121,10 @@ def sweep(function: Callable[[dict], Mapping], grid, out, workers: int | None = 
         the first design that succeeds).
     meta : mapping, optional
         What the rows depend on besides the design (default ``function.meta``, else the
-        function's name), kept in ``<out>.sweep.json``: resuming with different ``meta`` (another
-        job, other fixed parameters) is refused instead of mixing rows of two sweeps.
+        function's name), kept in ``<out>.sweep.json`` with the whole grid: resuming with different
+        ``meta`` (another job, other fixed parameters) or another grid (other values, another
+        order, 1 for 1.0) is refused instead of mixing rows of two sweeps; so is a file that is not
+        this sweep's journal, which is left byte for byte as it was.
 
     Returns
     -------
@@ -160,9 +162,8 @@ def sweep(function: Callable[[dict], Mapping], grid, out, workers: int | None = 
         meta = {"function": f"{getattr(function, '__module__', '?')}.{getattr(function, '__qualname__', repr(function))}"}
     meta = json.loads(json.dumps(dict(meta), sort_keys=True, default=str))
 
-    rows = RowFile(out, names)
+    rows = RowFile(out, names, designs, keys, meta)
     try:
-        check_meta(rows.path, meta, fresh=rows.outputs is None and not rows.done)
         if rows.outputs is None and columns is not None:
             rows.start(columns)
         elif columns is not None and rows.outputs != columns:
