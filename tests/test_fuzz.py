@@ -110,7 +110,8 @@ def files(tmp_path_factory):
     """A saved branch and trajectory to restart from and replay, in a folder of their own."""
     folder = tmp_path_factory.mktemp("fuzz")
     with contextlib.chdir(folder):
-        assert run(["trace", "balloon", "--set", "nodes=11", "--max-steps", "20", "--out", "branch.csv"])[0] == 0
+        assert run(["trace", "balloon", "--set", "nodes=11", "--max-steps", "20", "--until", "stretch=1.3",
+                    "--out", "branch.csv"])[0] == 0
         assert run(["simulate", "balloon", "--set", "nodes=11", "--t-end", "0.002", "--quiet",
                     "--out", "traj.npz"])[0] == 0
     return folder
