@@ -27,7 +27,7 @@ from snapmem.continuation.branch import Point, PointKind
 from snapmem.continuation.modes import legendre_mode
 from snapmem.continuation.options import FoldOptions
 from snapmem.errors import SolverError
-from snapmem.kernels.banded import BorderedMatrix
+from snapmem.kernels.banded import BorderedMatrix, scale_of
 
 log = logging.getLogger(__name__)
 
@@ -195,8 +195,32 @@ def _classify(tracer, c: Point, base: Point, p: Point) -> PointKind:
     turned = base.tangent[-1] * p.tangent[-1] < 0
     kind = PointKind.LP if pb.is_limit_point(c.coupling, turned) else PointKind.BP
     c.symmetry_broken = bool(kind == PointKind.BP and c.coupling > SYMMETRY_COUPLING)
+    if c.symmetry_broken and c.located and pb.jacobian_is_stiffness and tracer.opt.locate:
+        phi = _move_to_unfolded(tracer, c, phi)
     c.mode = legendre_mode(tracer.scene, phi) if kind == PointKind.BP else -1
     return kind
+
+
+def _move_to_unfolded(tracer, c: Point, phi: np.ndarray) -> np.ndarray:
+    """Put the symmetry-broken BP ``c`` (a fold of the mesh problem) at the bifurcation of the
+    perfect problem (:func:`unfold_bifurcation`), recording the imperfection |sigma| / |lambda
+    dR/dlambda| (the force that makes the bifurcation perfect, relative to the load's) as the
+    measure ``imperfection``; returns the null vector there (phi itself if unfolding fails, and
+    c stays the mesh's critical point)."""
+    pb = tracer.pb
+    found = unfold_bifurcation(pb, tracer.scene, c.x, c.lam, phi)
+    if found is None:
+        log.warning("could not unfold the imperfect BP at %s = %.6g: reported at the mesh's critical point",
+                    pb.control, c.lam)
+        return phi
+    x, lam, sigma, v = found
+    log.info("imperfect BP: mesh critical point at %s = %.8g, perfect BP at %.8g", pb.control, c.lam, lam)
+    load = np.linalg.norm(lam * pb.dF_dlam(x, lam))
+    c.x, c.lam = x, lam
+    _, J = pb.evaluate(x, lam)
+    c.eigs, c.vectors, c.subspace = np.array([float(v @ pb.stiffness(J).matvec(v))]), v[:, None], None
+    c.measured = {**pb.measures(x, lam), "imperfection": abs(sigma) / load if load > 0 else float("nan")}
+    return v
 
 
 #: The normalised coupling |phi0 . dR/dlambda| above which a BP's symmetry is broken by the mesh
@@ -291,4 +315,112 @@ def fold_newton(pb, scene, x, lam, phi, options):
         x, lam = x + d[:-1], lam + d[-1]
         if abs(d[-1]) > 0.5 * max(abs(lam), pb.lam_scale) or np.max(np.abs(d[:-1])) > 0.5 * L:
             return None                               # wandering off: refine the increment instead
+    return None
+
+
+# ----------------------------------------------------------------------------------------------
+# the bifurcation of the perfect problem behind an imperfect one
+def _singularity_function(K, psi):
+    """(v, g) of the bordered system [K psi; psi^T 0] [v; g] = [0; 1]: g = 0 exactly where K is
+    singular, and then v is its null vector (psi . v = 1). One banded solve, O(N)."""
+    lu = BorderedMatrix(K, psi, psi, [[0.0]]).factor()
+    if lu.singular:
+        return None, None
+    rhs = np.zeros(K.n + 1)
+    rhs[-1] = 1.0
+    sol = lu.solve(rhs)
+    return sol[:-1], float(sol[-1])
+
+
+def _fold_of_unfolding(pb, scene, x, lam, sigma, psi, tol, max_iterations=12):
+    """At fixed parameter lam, Newton on (x, sigma) for R(x, lam) + sigma psi = 0, g(x, lam) = 0
+    (a singular point of the problem perturbed by the force sigma psi): (x, sigma, v) or None.
+
+    The Jacobian is K bordered by psi and g_x = -D3Pi[v, v, .] (central differences of K v along
+    v, as :func:`fold_newton`); it is regular where the reduced equation's quadratic coefficient
+    phi . D2R[phi, phi] is not zero (a transcritical point: the sphere's even modes)."""
+    L = scene.meridian.size
+    for _ in range(max_iterations):
+        if pb.inadmissible(x, lam) is not None:
+            return None
+        F, K = pb.evaluate(x, lam)
+        v, g = _singularity_function(K, psi)
+        if v is None or not np.all(np.isfinite(F)):
+            return None
+        residual = F + sigma * psi
+        if np.max(np.abs(residual)) <= tol and abs(g) <= 1e-12 * scale_of(K):
+            return x, sigma, v
+        eps = 1e-6 * L / max(np.max(np.abs(v)), 1e-300)
+        g_x = -(pb.evaluate(x + eps * v, lam)[1].matvec(v) - pb.evaluate(x - eps * v, lam)[1].matvec(v)) / (2 * eps)
+        lu = BorderedMatrix(K, psi, g_x, [[0.0]]).factor()
+        if lu.singular:
+            return None
+        d = lu.solve(-np.append(residual, g))
+        x, sigma = x + d[:-1], sigma + d[-1]
+        if np.max(np.abs(d[:-1])) > 0.1 * L:
+            return None
+    return None
+
+
+def unfold_bifurcation(pb, scene, x, lam, phi, tol_factor: float = 1e-10, max_iterations: int = 30):
+    """The bifurcation point of the perfect problem that an imperfect (mesh) bifurcation at the
+    discrete critical point (x, lam) with null vector ``phi`` is a perturbation of.
+
+    On a mesh that breaks the symmetry separating a mode from the load, R(x, lam) = 0 has no BP
+    there: its singular point is a fold at distance O(sqrt(imperfection)) from the BP of the
+    symmetric problem, so it converges at half the discretisation order. The unfolding system
+
+        R(x, lam) + sigma psi = 0,   K(x, lam) v = 0 (g = 0),   v . dR/dlambda = 0,
+
+    with psi = phi (fixed, unit), finds the force sigma psi that makes the bifurcation perfect
+    and the point where it is: a regular system at a simple transcritical BP. Solved nested, each
+    part O(N): at fixed lam, Newton on (x, sigma) puts the perturbed problem at a singular point
+    (:func:`_fold_of_unfolding`); on lam, the secant method on h(lam) = v . dR/dlambda, which is
+    -(d sigma / d lam) v . psi along those singular points, so its zero is where the imperfection
+    needed is extremal, the perfect BP. The discrete critical point itself is the start
+    (sigma = 0 there).
+
+    Returns
+    -------
+    (x, lam, sigma, v) or None
+        The unfolded point, the imperfection force's size sigma [N] along the unit psi, and the
+        null vector v of K there (psi . v = 1); None if an iteration fails.
+    """
+    tol = tol_factor * scene.force_scale
+    psi = np.asarray(phi, float) / np.linalg.norm(phi)
+    scale = max(abs(lam), pb.lam_scale)
+
+    def h_of(x0, lam0, sigma0):
+        found = _fold_of_unfolding(pb, scene, x0, lam0, sigma0, psi, tol)
+        if found is None:
+            return None
+        xs, sigma, v = found
+        Fl = pb.dF_dlam(xs, lam0)
+        return xs, sigma, v, float(v @ Fl) / (np.linalg.norm(v) * np.linalg.norm(Fl) + 1e-300)
+
+    first = h_of(x, lam, 0.0)
+    if first is None:
+        return None
+    history = [(lam, *first)]
+    lam_next = lam + 1e-4 * scale
+    for _ in range(max_iterations):
+        lam_prev, x_prev, sigma_prev = history[-1][:3]
+        guess = (x_prev, sigma_prev)
+        if len(history) >= 2:                         # predict x and sigma linearly in lam
+            lam_pp, x_pp, sigma_pp = history[-2][:3]
+            w = (lam_next - lam_prev) / (lam_prev - lam_pp)
+            guess = (x_prev + w * (x_prev - x_pp), sigma_prev + w * (sigma_prev - sigma_pp))
+        found = h_of(guess[0], lam_next, guess[1])
+        if found is None:
+            return None
+        history.append((lam_next, *found))
+        (lam_a, *_, h_a), (lam_b, x_b, sigma_b, v_b, h_b) = history[-2], history[-1]
+        if h_b == 0.0 or abs(lam_b - lam_a) <= 1e-12 * scale:
+            return x_b, lam_b, sigma_b, v_b / np.linalg.norm(v_b)
+        if h_b == h_a:
+            return None
+        step = -h_b * (lam_b - lam_a) / (h_b - h_a)
+        if abs(step) > 0.2 * scale:
+            return None                               # wandering off
+        lam_next = lam_b + step
     return None
