@@ -186,6 +186,14 @@ def _classify(tracer, c: Point, base: Point, p: Point) -> PointKind:
     the load in the continuum, so on the mesh the bifurcation is imperfect) and ``mode`` (the
     Legendre mode of the null vector on a spherical reference, else -1;
     :func:`snapmem.continuation.modes.legendre_mode`).
+
+    An imperfect BP is moved to the bifurcation of the perfect problem
+    (:func:`unfold_bifurcation`). Where the mesh's branch turned back at one (an imperfect
+    transcritical point has no path through: the mesh's branch follows the bifurcating one),
+    and the unfolding finds a BP beside it with an imperfection below
+    :data:`IMPERFECTION_LIMIT`, the point is that BP and the trace continues on the branch of the
+    perfect problem: ``p`` is replaced, in place, by the point of the mesh's branch beyond the BP
+    along the perfect branch's tangent (:func:`_through_imperfect`).
     """
     pb = tracer.pb
     phi = null_vector(tracer, c)
@@ -195,32 +203,130 @@ def _classify(tracer, c: Point, base: Point, p: Point) -> PointKind:
     turned = base.tangent[-1] * p.tangent[-1] < 0
     kind = PointKind.LP if pb.is_limit_point(c.coupling, turned) else PointKind.BP
     c.symmetry_broken = bool(kind == PointKind.BP and c.coupling > SYMMETRY_COUPLING)
-    if c.symmetry_broken and c.located and pb.jacobian_is_stiffness and tracer.opt.locate:
+    unfold = c.located and pb.jacobian_is_stiffness and tracer.opt.locate
+    if unfold and c.symmetry_broken:
         phi = _move_to_unfolded(tracer, c, phi)
+    elif unfold and kind == PointKind.LP and c.crossed == 1:
+        moved = _through_imperfect(tracer, c, phi, base, p)
+        if moved is not None:
+            kind, phi, c.symmetry_broken = PointKind.BP, moved, True
     c.mode = legendre_mode(tracer.scene, phi) if kind == PointKind.BP else -1
     return kind
 
 
-def _move_to_unfolded(tracer, c: Point, phi: np.ndarray) -> np.ndarray:
-    """Put the symmetry-broken BP ``c`` (a fold of the mesh problem) at the bifurcation of the
-    perfect problem (:func:`unfold_bifurcation`), recording the imperfection |sigma| / |lambda
-    dR/dlambda| (the force that makes the bifurcation perfect, relative to the load's) as the
-    measure ``imperfection``; returns the null vector there (phi itself if unfolding fails, and
-    c stays the mesh's critical point)."""
+#: The largest imperfection (the force making a bifurcation perfect, relative to the load's
+#: force) for which a fold of the mesh's branch is taken as an imperfect BP and passed through.
+IMPERFECTION_LIMIT = 1e-2
+
+
+def _imperfection(pb, found) -> float:
+    """|sigma| / |lambda dR/dlambda| of an unfolded point (x, lam, sigma, v)."""
+    x, lam, sigma, _ = found
+    load = np.linalg.norm(lam * pb.dF_dlam(x, lam))
+    return abs(sigma) / load if load > 0 else float("inf")
+
+
+def _record_unfolded(tracer, c: Point, found) -> np.ndarray:
+    """Put c at the unfolded point ``found`` = (x, lam, sigma, v), with the measure
+    ``imperfection`` (:func:`_imperfection`); returns v."""
     pb = tracer.pb
-    found = unfold_bifurcation(pb, tracer.scene, c.x, c.lam, phi)
-    if found is None:
-        log.warning("could not unfold the imperfect BP at %s = %.6g: reported at the mesh's critical point",
-                    pb.control, c.lam)
-        return phi
     x, lam, sigma, v = found
     log.info("imperfect BP: mesh critical point at %s = %.8g, perfect BP at %.8g", pb.control, c.lam, lam)
-    load = np.linalg.norm(lam * pb.dF_dlam(x, lam))
     c.x, c.lam = x, lam
     _, J = pb.evaluate(x, lam)
     c.eigs, c.vectors, c.subspace = np.array([float(v @ pb.stiffness(J).matvec(v))]), v[:, None], None
-    c.measured = {**pb.measures(x, lam), "imperfection": abs(sigma) / load if load > 0 else float("nan")}
+    c.measured = {**pb.measures(x, lam), "imperfection": _imperfection(pb, found)}
     return v
+
+
+def _move_to_unfolded(tracer, c: Point, phi: np.ndarray) -> np.ndarray:
+    """Put the symmetry-broken BP ``c`` (a fold of the mesh problem) at the bifurcation of the
+    perfect problem (:func:`unfold_bifurcation`); returns the null vector there (phi itself if
+    unfolding fails, and c stays the mesh's critical point)."""
+    found = unfold_bifurcation(tracer.pb, tracer.scene, c.x, c.lam, phi)
+    if found is None:
+        log.warning("could not unfold the imperfect BP at %s = %.6g: reported at the mesh's critical point",
+                    tracer.pb.control, c.lam)
+        return phi
+    return _record_unfolded(tracer, c, found)
+
+
+def _through_imperfect(tracer, c: Point, phi: np.ndarray, base: Point, p: Point):
+    """If the fold c of the mesh's branch is an imperfect BP (the unfolding converges beside it
+    with an imperfection below IMPERFECTION_LIMIT), put c at the perfect BP and p, in place, on
+    the mesh's branch beyond it; returns the null vector there, or None (c is an LP)."""
+    pb = tracer.pb
+    found = unfold_bifurcation(pb, tracer.scene, c.x, c.lam, phi)
+    if found is None or _imperfection(pb, found) > IMPERFECTION_LIMIT:
+        return None
+    x, lam, _, v = found
+    offset = np.append(c.x - x, c.lam - lam)
+    length = max(p.ds, 3.0 * math.sqrt(tracer.inner(offset, offset)))
+    beyond = None
+    for d in _branch_directions(tracer, x, lam, v):
+        d = d * (np.sign(d[-1] * base.tangent[-1]) or 1.0)   # the parameter keeps its direction
+        guide = Point(x, lam, tangent=d, s=c.s)
+        guide.subspace = base.subspace
+        candidate, J1 = tracer.correct(guide, length)
+        if candidate is None:
+            continue
+        candidate.s, candidate.ds = c.s + length, length
+        try:
+            tracer.finish(candidate, J1, guide)
+        except SolverError:
+            continue
+        # the branch continued beyond a BP keeps the parameter's direction and has one more (or
+        # one fewer) negative eigenvalue than before it: the bifurcating branch there has not
+        if candidate.tangent[-1] * base.tangent[-1] > 0 and abs(candidate.negative - base.negative) == 1:
+            beyond = candidate
+            break
+    if beyond is None:
+        return None
+    log.info("passed through the imperfect BP at %s = %.8g onto the branch beyond it", pb.control, lam)
+    for name in ("x", "lam", "tangent", "eigs", "negative", "vectors", "subspace", "s", "ds", "iterations"):
+        setattr(p, name, getattr(beyond, name))
+    p.measured = None
+    _record_unfolded(tracer, c, found)
+    return v
+
+
+def _branch_directions(tracer, x, lam, v) -> list:
+    """The unit directions (x, lambda) of the two branches through the simple BP (x, lam) with
+    null vector v: the roots of Keller's algebraic bifurcation equation a r^2 + 2 b r + c = 0
+    (snapmem.continuation.switching), directions r u + t with t = (w, 1) orthogonal to u = (v, 0)."""
+    pb = tracer.pb
+    _, J = pb.evaluate(x, lam)
+    u = np.append(v, 0.0)
+    u /= math.sqrt(tracer.inner(u, u))
+    lu = BorderedMatrix(J, u[:-1], u[:-1], [[0.0]]).factor()
+    if lu.singular:
+        return []
+    t = np.append(lu.solve(np.append(-pb.dF_dlam(x, lam), 0.0))[:-1], 1.0)
+    t /= math.sqrt(tracer.inner(t, t))
+    u = u - tracer.inner(u, t) * t
+    u /= math.sqrt(tracer.inner(u, u))
+    h = 1e-5 * tracer.scene.meridian.size
+    psi = v / np.linalg.norm(v)
+
+    def d2(a_, b_):                                   # psi . D2F[a_, b_], central differences of J a_ along b_
+        e = h / max(np.max(np.abs(b_)), 1e-300)
+        plus = pb.evaluate(x + e * b_[:-1], lam + e * b_[-1])[1].matvec(a_[:-1]) \
+            + pb.dF_dlam(x + e * b_[:-1], lam + e * b_[-1]) * a_[-1]
+        minus = pb.evaluate(x - e * b_[:-1], lam - e * b_[-1])[1].matvec(a_[:-1]) \
+            + pb.dF_dlam(x - e * b_[:-1], lam - e * b_[-1]) * a_[-1]
+        return float(psi @ (plus - minus)) / (2 * e)
+
+    a, b, cc = d2(u, u), d2(u, t), d2(t, t)
+    if abs(a) <= 1e-8 * (abs(a) + abs(b) + abs(cc)):
+        roots = [-cc / (2 * b)] if b != 0 else []
+        directions = [u]
+    else:
+        disc = max(b * b - a * cc, 0.0)
+        roots, directions = [(-b + math.sqrt(disc)) / a, (-b - math.sqrt(disc)) / a], []
+    for r in roots:
+        d = r * u + t
+        directions.append(d / math.sqrt(tracer.inner(d, d)))
+    return directions
 
 
 #: The normalised coupling |phi0 . dR/dlambda| above which a BP's symmetry is broken by the mesh
