@@ -134,3 +134,19 @@ def test_switching_at_the_p1_pitchfork_gives_mirror_halves(e_balloon):
     # the mirror image (reflection + translation) of one half is the other: same pressures at the end
     assert plus.table["pressure"].iloc[-1] == pytest.approx(minus.table["pressure"].iloc[-1], rel=1e-6)
     assert max(_shape_deviation(plus, p) for p in plus.states) > 1e-2
+
+
+def test_balloon_bifurcations_study(tmp_path):
+    import importlib.util
+    from pathlib import Path
+    import pandas as pd
+    path = Path(__file__).resolve().parents[1] / "studies" / "balloon_bifurcations.py"
+    spec = importlib.util.spec_from_file_location("balloon_bifurcations", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main(["--quick", "--out", str(tmp_path)])
+    t = pd.read_csv(tmp_path / "balloon_bifurcations.csv")
+    pear = t[(t["mode"] == 2) & (t["nodes"] == 201)].iloc[0]
+    assert 1.9 < pear["observed_order"] < 2.1 and abs(pear["error"]) < 3e-4
+    assert pear["criterion_stretch"] == pytest.approx(2.91518, abs=1e-5)
+    assert (tmp_path / "balloon_bifurcations.png").exists()
