@@ -150,3 +150,71 @@ def test_balloon_bifurcations_study(tmp_path):
     assert 1.9 < pear["observed_order"] < 2.1 and abs(pear["error"]) < 3e-4
     assert pear["criterion_stretch"] == pytest.approx(2.91518, abs=1e-5)
     assert (tmp_path / "balloon_bifurcations.png").exists()
+
+
+class _Transcritical:
+    """Pi = x1^3/3 - lam x1^2/2 + eps x1 + x2^2/2 - eps2 x2 + gamma x1^2 x2: a transcritical
+    bifurcation at lam = 2 gamma x2 on x1 = 0 when eps = 0; eps is its imperfection."""
+
+    lam_scale = 1.0
+    x_weight = np.ones(2)
+    control = "lam"
+
+    def __init__(self, eps=0.0, eps2=0.0, gamma=0.3):
+        self.eps, self.eps2, self.gamma = eps, eps2, gamma
+
+    def evaluate(self, x, lam, order=2, with_floor=False):
+        from snapmem.kernels.banded import BandedMatrix
+        x1, x2 = x
+        g = self.gamma
+        F = np.array([x1 * x1 - lam * x1 + self.eps + 2 * g * x1 * x2, x2 - self.eps2 + g * x1 * x1])
+        K = BandedMatrix.from_dense(np.array([[2 * x1 - lam + 2 * g * x2, 2 * g * x1], [2 * g * x1, 1.0]]), 1)
+        return F, K
+
+    def dF_dlam(self, x, lam):
+        return np.array([-x[0], 0.0])
+
+    def inadmissible(self, x, lam):
+        return None
+
+    def stiffness(self, J):
+        return J
+
+
+_TOY_SCENE = type("ToyScene", (), {"force_scale": 1.0, "meridian": type("M", (), {"size": 1.0})()})()
+
+
+def test_unfolding_finds_the_perfect_transcritical_point():
+    """From near the fold of the imperfect problem (x1 = sqrt(eps), lam = 2 sqrt(eps) for
+    gamma = 0), the unfolding returns the perfect BP: sigma psi cancels the imperfection along
+    psi, and the BP sits where the trivial branch x1 = 0 of the perfect problem loses stability."""
+    from snapmem.continuation.locate import unfold_bifurcation
+    eps, eps2, gamma = 1e-4, 0.02, 0.3
+    pb = _Transcritical(eps, eps2, gamma)
+    x0, lam0 = np.array([np.sqrt(eps), eps2]), 2 * np.sqrt(eps) + 2 * gamma * eps2
+    K = pb.evaluate(x0, lam0)[1].to_dense()
+    psi = np.linalg.eigh(K)[1][:, 0]
+    x, lam, sigma, v = unfold_bifurcation(pb, _TOY_SCENE, x0, lam0, psi)
+    psi = psi / np.linalg.norm(psi)
+    sigma_exact = -eps / psi[0]
+    x2 = eps2 - sigma_exact * psi[1]
+    assert sigma == pytest.approx(sigma_exact, rel=1e-6)            # the residual tolerance is 1e-10
+    assert abs(x[0]) < 1e-8 and x[1] == pytest.approx(x2, rel=1e-8)
+    assert lam == pytest.approx(2 * gamma * x2, rel=1e-6)             # the mesh fold was 2 sqrt(eps) away
+    assert abs(v @ pb.dF_dlam(x, lam)) < 1e-12
+
+
+def test_switching_direction_at_a_transcritical_point():
+    """Keller's equation at the perfect transcritical point: a = 2, b = -1, c = 0; the new
+    branch leaves along x1 = lam (direction (1, 0, 1)), not along the null vector alone."""
+    from snapmem.continuation.branch import Point
+    from snapmem.continuation.options import ContinuationOptions
+    from snapmem.continuation.switching import bifurcation_direction
+    from snapmem.continuation.tracer import Tracer
+    pb = _Transcritical()
+    tracer = Tracer(pb, ContinuationOptions(), _TOY_SCENE)
+    c = Point(np.zeros(2), 1e-9, tangent=np.array([0.0, 0.0, 1.0]))     # K exactly singular at 0: the band LU stops there
+    d, (a, b, cc), fold = bifurcation_direction(tracer, c, np.array([1.0, 0.0]))
+    assert not fold
+    assert a == pytest.approx(2.0, rel=1e-6) and b == pytest.approx(-1.0, rel=1e-6) and abs(cc) < 1e-8
+    assert np.allclose(np.abs(d), [2 ** -0.5, 0.0, 2 ** -0.5], atol=1e-6) and d[0] * d[2] > 0

@@ -495,14 +495,14 @@ def unfold_bifurcation(pb, scene, x, lam, phi, tol_factor: float = 1e-10, max_it
     tol = tol_factor * scene.force_scale
     psi = np.asarray(phi, float) / np.linalg.norm(phi)
     scale = max(abs(lam), pb.lam_scale)
+    load_scale = np.linalg.norm(pb.dF_dlam(x, lam)) + 1e-300       # one fixed scale: h must stay smooth
 
     def h_of(x0, lam0, sigma0):
         found = _fold_of_unfolding(pb, scene, x0, lam0, sigma0, psi, tol)
         if found is None:
             return None
         xs, sigma, v = found
-        Fl = pb.dF_dlam(xs, lam0)
-        return xs, sigma, v, float(v @ Fl) / (np.linalg.norm(v) * np.linalg.norm(Fl) + 1e-300)
+        return xs, sigma, v, float(v @ pb.dF_dlam(xs, lam0)) / (np.linalg.norm(v) * load_scale)
 
     first = h_of(x, lam, 0.0)
     if first is None:
