@@ -188,7 +188,7 @@ def test_unfolding_finds_the_perfect_transcritical_point():
     """From near the fold of the imperfect problem (x1 = sqrt(eps), lam = 2 sqrt(eps) for
     gamma = 0), the unfolding returns the perfect BP: sigma psi cancels the imperfection along
     psi, and the BP sits where the trivial branch x1 = 0 of the perfect problem loses stability."""
-    from snapmem.continuation.locate import unfold_bifurcation
+    from snapmem.continuation.unfold import unfold_bifurcation
     eps, eps2, gamma = 1e-4, 0.02, 0.3
     pb = _Transcritical(eps, eps2, gamma)
     x0, lam0 = np.array([np.sqrt(eps), eps2]), 2 * np.sqrt(eps) + 2 * gamma * eps2
@@ -213,7 +213,8 @@ def test_switching_direction_at_a_transcritical_point():
     from snapmem.continuation.tracer import Tracer
     pb = _Transcritical()
     tracer = Tracer(pb, ContinuationOptions(), _TOY_SCENE)
-    c = Point(np.zeros(2), 1e-9, tangent=np.array([0.0, 0.0, 1.0]))     # K exactly singular at 0: the band LU stops there
+    # at lam = 0 K is exactly singular and the band LU of the bordered solve stops: just beside it
+    c = Point(np.zeros(2), 1e-9, tangent=np.array([0.0, 0.0, 1.0]))
     d, (a, b, cc), fold = bifurcation_direction(tracer, c, np.array([1.0, 0.0]))
     assert not fold
     assert a == pytest.approx(2.0, rel=1e-6) and b == pytest.approx(-1.0, rel=1e-6) and abs(cc) < 1e-8

@@ -13,7 +13,7 @@ whose roots are the known branch (alpha = 0 when c = 0) and the new one: a pitch
 leaves along u, a transcritical point along a mix. The second derivatives are central
 differences of the Jacobian-vector product along each direction: four evaluations, banded,
 O(N). Where the mesh breaks the BP's symmetry (``symmetry_broken``) the bifurcation is imperfect:
-the point is reported at the perfect problem's BP (snapmem.continuation.locate.unfold_bifurcation),
+the point is reported at the perfect problem's BP (snapmem.continuation.unfold.unfold_bifurcation),
 near which the mesh's branches are the two halves of a hyperbola; the branch is traced along phi
 (the mesh's fold direction) both ways from there.
 """
