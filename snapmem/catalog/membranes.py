@@ -14,6 +14,8 @@ import numpy as np
 
 from snapmem.catalog.registry import Parameter, SceneSpec, register
 from snapmem.errors import SnapmemError
+from snapmem.model.constraints import CentreOfMassHeight
+from snapmem.model.dofs import node_areas
 from snapmem.model.materials import LAWS, Law, law_class, law_name
 from snapmem.model.meridian import Meridian, disc, sphere, torus
 from snapmem.model.parameters import MAX_NODES, nodes_note
@@ -90,10 +92,12 @@ def _recorded(params: dict, law: Law) -> dict:
 
 
 def build_membrane(params: dict, with_loads: tuple, meridian: Meridian, fixed, name: str,
-                   start_guess=None, probes=None) -> Scene:
+                   start_guess=None, probes=None, constraints=()) -> Scene:
     """Assemble a membrane scene from resolved material and load parameters.
 
-    Includes the electric term only when there is a voltage (or it is asked for).
+    Includes the electric term only when there is a voltage (or it is asked for). ``constraints``:
+    callables law -> node term (a constraint held by a multiplier, snapmem.model.constraints)
+    appended to the terms.
     """
     H = params["H"]
     law = scene_law(params)
@@ -104,6 +108,7 @@ def build_membrane(params: dict, with_loads: tuple, meridian: Meridian, fixed, n
     loads = {"pressure": params["pressure"]}
     if len(terms) == 3:
         loads["voltage"] = voltage
+    terms.extend(make(law) for make in constraints)
     return Scene(meridian, H, terms, fixed=fixed, loads=loads, name=name, parameters=_recorded(params, law),
                  start_guess=start_guess, probes=probes)
 
@@ -139,13 +144,25 @@ def build_plate(params: dict, with_loads: tuple) -> Scene:
                           probes={"deflection": lambda q: float(q[-1])})
 
 
+#: The balloon's supports: what removes its rigid translation along the axis.
+BALLOON_SUPPORTS = ("pole", "free")
+
+
 def _balloon(params, with_loads):
     R = params["R"]
     meridian = sphere(R, params["nodes"])
     n = meridian.nodes
-    fixed = [0, 1, 2 * (n - 1)]            # south pole: r and z; north pole: r
+    support = params["support"]
+    if support not in BALLOON_SUPPORTS:
+        raise SnapmemError(f"support = {support!r}: must be one of {', '.join(BALLOON_SUPPORTS)}")
+    constraints = ()
+    if support == "pole":
+        fixed = [0, 1, 2 * (n - 1)]        # south pole: r and z; north pole: r
+    else:                                  # poles on the axis; the centre of mass height held
+        fixed = [0, 2 * (n - 1)]
+        constraints = (lambda law: CentreOfMassHeight(meridian.z, node_areas(meridian), law.mu * params["H"]),)
     return build_membrane(params, with_loads, meridian, fixed, "balloon",
-                          probes={"stretch": lambda q: float(q[0::2].max() / R)})
+                          probes={"stretch": lambda q: float(q[0: 2 * n: 2].max() / R)}, constraints=constraints)
 
 
 def _torus(params, with_loads):
@@ -169,7 +186,10 @@ register(SceneSpec(
 register(SceneSpec(
     "balloon", "spherical balloon, poles on the axis (paper Figs 3e, 4)",
     common_parameters(101, H=0.1)
-    + (Parameter("R", 10.0, "m", "sphere radius", minimum=0.0, open_min=True),)
+    + (Parameter("R", 10.0, "m", "sphere radius", minimum=0.0, open_min=True),
+       Parameter("support", "pole", "", "what removes the rigid translation: 'pole' (the south pole's z "
+                 "held) or 'free' (the centre of mass height held by a multiplier; keeps the up-down "
+                 "symmetry)", str))
     + material_parameters(),
     _balloon))
 

@@ -28,6 +28,7 @@ brentq = _lazy.function("scipy.optimize", "brentq")     # scipy.optimize: import
 from snapmem.continuation.branch import Point, PointKind
 from snapmem.continuation.modes import legendre_mode
 from snapmem.continuation.options import FoldOptions
+from snapmem.continuation.unfold import move_to_unfolded, through_imperfect
 from snapmem.errors import SolverError
 from snapmem.kernels.banded import BorderedMatrix
 
@@ -188,6 +189,13 @@ def _classify(tracer, c: Point, base: Point, p: Point) -> PointKind:
     the load in the continuum, so on the mesh the bifurcation is imperfect) and ``mode`` (the
     Legendre mode of the null vector on a spherical reference, else -1;
     :func:`snapmem.continuation.modes.legendre_mode`).
+
+    An imperfect BP is moved to the bifurcation of the perfect problem (snapmem.continuation.unfold).
+    Where the mesh's branch turned back at one (an imperfect transcritical point has no path
+    through: the mesh's branch follows the bifurcating one) and the unfolding finds a BP beside
+    it with an imperfection below ``unfold.IMPERFECTION_LIMIT``, the point is that BP and the
+    trace continues on the perfect problem's branch: ``p`` is replaced, in place, by the point of
+    the mesh's branch beyond the BP (``unfold.through_imperfect``).
     """
     pb = tracer.pb
     phi = null_vector(tracer, c)
@@ -197,6 +205,13 @@ def _classify(tracer, c: Point, base: Point, p: Point) -> PointKind:
     turned = base.tangent[-1] * p.tangent[-1] < 0
     kind = PointKind.LP if pb.is_limit_point(c.coupling, turned) else PointKind.BP
     c.symmetry_broken = bool(kind == PointKind.BP and c.coupling > SYMMETRY_COUPLING)
+    unfold = c.located and pb.jacobian_is_stiffness and tracer.opt.locate
+    if unfold and c.symmetry_broken:
+        phi = move_to_unfolded(tracer, c, phi)
+    elif unfold and kind == PointKind.LP and c.crossed == 1:
+        moved = through_imperfect(tracer, c, phi, base, p)
+        if moved is not None:
+            kind, phi, c.symmetry_broken = PointKind.BP, moved, True
     c.mode = legendre_mode(tracer.scene, phi) if kind == PointKind.BP else -1
     return kind
 

@@ -45,9 +45,10 @@ def mode_spectrum(scene: Scene, phi: np.ndarray) -> np.ndarray | None:
         return None
     theta, _ = ref
     full = np.asarray(phi, float)
-    if full.size != scene.meridian.q.size:
-        full = np.zeros(scene.meridian.q.size)
+    if full.size != scene.meridian.q.size:        # over the free dofs (and any body or multiplier)
+        full = np.zeros(scene.n_node_dofs + len(scene.bodies))
         full[scene.free] = np.asarray(phi, float)[: scene.free.size]
+        full = full[: scene.n_node_dofs]
     spacing = np.gradient(theta)
     w = np.abs(np.sin(theta) * spacing)
     w[[0, -1]] = 0.125 * spacing[[0, -1]] ** 2           # the poles' caps: pi (h/2)^2 / (2 pi)

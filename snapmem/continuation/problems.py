@@ -16,6 +16,7 @@ import numpy as np
 from snapmem.continuation.options import CONTROLS
 from snapmem.errors import SnapmemError
 from snapmem.kernels.banded import BorderedMatrix, eigenvalues_near_zero
+from snapmem.model.constraints import multiplier_count
 from snapmem.model.scene import Scene
 
 
@@ -45,6 +46,9 @@ class LoadProblem:
         self.factor = 1.0 if control != "E_hat" else scene.thickness * math.sqrt(scene.mu / scene.permittivity)
         L = scene.meridian.size
         self.x_weight = np.full(scene.n_free, 1.0 / (L * L * scene.meridian.nodes))
+        #: Lagrange multipliers of linear constraints among the unknowns (a free balloon's support):
+        #: each adds one negative eigenvalue to the saddle stiffness, not counted in the stability
+        self.multipliers = multiplier_count(scene)
         self.lam_scale = {"pressure": scene.mu * scene.thickness / L,
                           "voltage": scene.thickness * math.sqrt(scene.mu / (scene.permittivity or 1.0)),
                           "E_hat": 1.0}[control]
@@ -92,14 +96,18 @@ class LoadProblem:
         the whole iterated subspace, to warm-start the next point).
 
         ``tol`` bounds the change of the eigenvalue nearest zero relative to |K|; at most ``sweeps``
-        inverse iterations; ``lu``, K's factorisation if already made.
+        inverse iterations; ``lu``, K's factorisation if already made. With constraints held by
+        multipliers K is their saddle matrix: the count is that of K on the constraints' tangent
+        space (the saddle's less one per multiplier, Haynsworth); the eigenvalues are the saddle's
+        (they vanish where the constrained stiffness is singular).
         """
         if lu is None:
             lu = K.factor()
         eigs, vectors, subspace = eigenvalues_near_zero(K, n_eigs, start, lu, tol, max_iterations=sweeps,
                                                         subspace=True)
         negative = getattr(lu, "negative", None)          # the band factorisations carry the inertia
-        return eigs, K.negative_count() if negative is None else negative, vectors, subspace
+        negative = K.negative_count() if negative is None else negative
+        return eigs, negative - self.multipliers, vectors, subspace
 
     def measures(self, x, lam) -> dict:
         q, loads = self.state(x, lam)

@@ -12,8 +12,10 @@ bifurcation equation, the Lyapunov-Schmidt reduction to second order)
 whose roots are the known branch (alpha = 0 when c = 0) and the new one: a pitchfork (a = 0)
 leaves along u, a transcritical point along a mix. The second derivatives are central
 differences of the Jacobian-vector product along each direction: four evaluations, banded,
-O(N). Where the mesh breaks the BP's symmetry (``symmetry_broken``) the singular point is a fold
-of the discrete problem (its tangent is phi): the branch through it is traced along phi both ways.
+O(N). Where the mesh breaks the BP's symmetry (``symmetry_broken``) the bifurcation is imperfect:
+the point is reported at the perfect problem's BP (snapmem.continuation.unfold.unfold_bifurcation),
+near which the mesh's branches are the two halves of a hyperbola; the branch is traced along phi
+(the mesh's fold direction) both ways from there.
 """
 
 from __future__ import annotations
