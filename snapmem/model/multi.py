@@ -17,7 +17,6 @@ built with a voltage term). Per-membrane measures carry the membrane's number as
 
 from __future__ import annotations
 
-import math
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -244,7 +243,3 @@ def stack_bands(blocks: Sequence[BandedMatrix], bandwidth: int) -> BandedMatrix:
         start += B.n
     return BandedMatrix.from_lower(lower, bandwidth)
 
-
-def total_volume_of(chamber: Chamber, volumes: Sequence[float]) -> float:
-    """V_dead + sum_i s_i V_i from the membranes' volumes (one per membrane of the scene)."""
-    return chamber.dead_volume + math.fsum(s * volumes[i] for i, s in zip(chamber.membranes, chamber.signs))
