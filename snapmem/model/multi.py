@@ -225,6 +225,13 @@ class MultiScene:
             out.update({f"{k}_{i + 1}": v for k, v in o.items()})
         return out
 
+    def __getattr__(self, name):
+        """What a single-membrane Scene has and this one lacks (dynamics, contact, export): one clear error."""
+        if name.startswith("__"):
+            raise AttributeError(name)
+        raise SnapmemError(f"scene {self.__dict__.get('name', 'multi')!r} has several membranes: {name!r} is not "
+                           "available for it yet (statics and continuation are: snapmem trace)")
+
     def __repr__(self):
         return (f"MultiScene({self.name!r}, membranes={len(self.membranes)}, "
                 f"chambers={[c.kind.value for c in self.chambers]}, loads={self.loads})")
