@@ -34,7 +34,8 @@ def _two_balloons(params: dict, with_loads: tuple) -> MultiScene:
     kind = ChamberKind(params["chamber"])
     chamber = Chamber(kind, (0, 1), pressure=0.0, dead_volume=params["dead_volume"], p_atm=params["p_atm"],
                       amount=params["gas_amount"])
-    return MultiScene([first, second], [chamber], name="two_balloons", parameters=params)
+    recorded = {**first.parameters, "pressure": 0.0}          # the law as recorded (a law instance by its name)
+    return MultiScene([first, second], [chamber], name="two_balloons", parameters=recorded)
 
 
 register(SceneSpec(

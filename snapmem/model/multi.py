@@ -99,6 +99,11 @@ class MultiScene:
         return "pressure" if c == 0 else f"pressure_{c + 1}"
 
     @property
+    def terms(self) -> tuple:
+        """Every membrane's energy terms, membrane by membrane."""
+        return tuple(t for m in self.membranes for t in m.terms)
+
+    @property
     def n_free(self) -> int:
         return int(self.free.size)
 
