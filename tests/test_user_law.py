@@ -141,7 +141,7 @@ def test_every_scene_takes_a_law_instance():
     for name in snapmem.SCENES:
         scene = build_scene(name, law=law, nodes=21)
         stretching = [t for t in scene.terms if isinstance(t, snapmem.Stretching)]
-        assert [t.law for t in stretching] == [law], name
+        assert stretching and all(t.law == law for t in stretching), name      # one per membrane
         assert scene.parameters["material"] == "ogden" and scene.parameters["mu"] == 4.0e5
         assert "c1" not in scene.parameters
 

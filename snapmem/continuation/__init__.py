@@ -16,6 +16,7 @@ from snapmem.continuation.problems import LoadProblem, VolumeProblem, make_probl
 from snapmem.continuation.tracer import Tracer, snap_by_tracing, trace
 from snapmem.continuation.diagram import Connection, Diagram, read_diagram
 from snapmem.continuation.switching import bifurcation_direction, switch_branch
+import snapmem.continuation.chambers  # noqa: F401  (registers the multi-membrane problems)
 
 __all__ = [
     "CONTROLS", "ContinuationOptions", "FoldOptions",

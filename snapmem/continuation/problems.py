@@ -240,8 +240,18 @@ class VolumeProblem(LoadProblem):
 
 
 
+#: Functions (scene, control) -> problem or None, asked first: scenes of another kind (several
+#: membranes and their chambers, snapmem.continuation.chambers) register theirs here on import.
+PROBLEM_FACTORIES: list = []
+
+
 def make_problem(scene: Scene, control: str) -> LoadProblem:
-    """The problem of tracing ``scene`` in ``control`` (one of :data:`CONTROLS`)."""
+    """The problem of tracing ``scene`` in ``control`` (one of :data:`CONTROLS`, or a control a
+    factory of :data:`PROBLEM_FACTORIES` takes)."""
+    for factory in PROBLEM_FACTORIES:
+        problem = factory(scene, control)
+        if problem is not None:
+            return problem
     if control not in CONTROLS:
         raise SnapmemError(f"control = {control!r}: must be one of {', '.join(CONTROLS)}")
     if control == "volume":

@@ -1,0 +1,231 @@
+"""Continuation of multi-membrane scenes whose chambers hold a fluid or a gas.
+
+The unknowns are the membranes' free degrees of freedom y and the pressure p_c of every chamber
+with a multiplier (a fluid or a gas, :class:`~snapmem.model.chambers.Chamber`); the equations
+
+    R(y; p) = 0                                  (each membrane under its chamber's pressure)
+    -(V_c(y) - V_c*(p_c)) = 0                    (one per such chamber)
+
+with V_c* the fluid volume (fluid) or the gas' volume n R T / (p_c + p_atm) (gas). They are the
+stationarity conditions of the Lagrangian L(y, p) = sum_i Pi_i(y_i; p) + sum_c p_c V_c*(p_c)
+- E*_c(p_c): the Jacobian
+
+    J = [[K, -G], [-G^T, -D]],     G = (dV_c/dy) (n, k),  D = diag(-dV_c*/dp_c) >= 0
+
+is symmetric, the band K bordered by one row and column per chamber (O(N) per membrane). Its
+elimination of p gives the Hessian of the total energy on the constraint set: K + G D^-1 G^T for
+a gas (the gas' stiffness n R T / V^2 along grad V), K on G^T dy = 0 for a fluid. Haynsworth's
+inertia formula counts that energy's negative eigenvalues exactly,
+
+    neg = neg(K) + neg(S) - k,      S = -D - G^T K^-1 G  (k x k),
+
+which is the stability reported. The eigenvalues watched (``min_eig``) are J's nearest zero: J is
+singular exactly where the energy's Hessian is, and its null vector is that Hessian's (with the
+pressure change it carries), so critical points are located and branches switched on J.
+
+Controls: ``volume`` (the fluid chamber's volume [m^3]), ``gas_amount`` (n R T of the gas chamber
+[J]), ``pressure`` (a prescribed-pressure chamber's pressure [Pa]) and ``voltage_1``, ... (a
+membrane's voltage [V]).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from snapmem.continuation.problems import PROBLEM_FACTORIES, LoadProblem
+from snapmem.errors import SnapmemError
+from snapmem.kernels.banded import BorderedMatrix, eigenvalues_near_zero
+from snapmem.model.chambers import ChamberKind, gas_compliance, gas_volume
+from snapmem.model.multi import MultiScene
+
+#: Controls of a multi-membrane scene besides the membranes' voltages ``voltage_1``, ...
+CHAMBER_CONTROLS = ("volume", "gas_amount", "pressure")
+
+
+class ChamberProblem(LoadProblem):
+    """Equilibria of a :class:`~snapmem.model.multi.MultiScene`: x = (free dofs, the pressures of
+    the fluid and gas chambers), parameter ``control`` (see the module docstring)."""
+
+    jacobian_is_stiffness = True        # J is singular exactly where the energy's Hessian is
+
+    def __init__(self, scene: MultiScene, control: str):
+        self.scene, self.control = scene, control
+        self.base = scene.resolve_loads(None)
+        self.multiplied = [c for c, ch in enumerate(scene.chambers) if ch.has_multiplier]
+        self.load = None
+        self.controlled = None
+        kind = {"volume": ChamberKind.VOLUME, "gas_amount": ChamberKind.GAS, "pressure": ChamberKind.PRESSURE}
+        if control in kind:
+            found = [c for c, ch in enumerate(scene.chambers) if ch.kind is kind[control]]
+            if not found:
+                raise SnapmemError(f"control = {control!r}: scene {scene.name!r} has no {kind[control].value} "
+                                   f"chamber (it has {[ch.kind.value for ch in scene.chambers]})")
+            self.controlled = found[0]
+            if control == "pressure":
+                self.load = scene.pressure_name(self.controlled)
+        elif control in scene.loads and control.startswith("voltage_"):
+            self.load = control
+        else:
+            raise SnapmemError(f"control = {control!r}: scene {scene.name!r} takes "
+                               f"{', '.join(self._allowed())}")
+        self.factor = 1.0
+        L, N = scene.meridian.size, scene.meridian.nodes
+        self.p_scale = scene.mu * scene.thickness / L
+        self.x_weight = np.concatenate([np.full(scene.n_free, 1.0 / (L * L * N)),
+                                        np.full(len(self.multiplied), 1.0 / self.p_scale ** 2)])
+        q0 = scene.reference_state()
+        v0 = abs(scene.chamber_volume(q0, self.controlled)) if self.controlled is not None else 0.0
+        v0 = v0 if v0 > 0 else L ** 3
+        self.lam_scale = {"volume": 10.0 * v0, "pressure": self.p_scale,
+                          "gas_amount": 10.0 * v0 * self.p_scale}.get(control, None)
+        if self.lam_scale is None:        # a voltage
+            self.lam_scale = scene.thickness * np.sqrt(scene.mu / (scene.permittivity or 1.0))
+        # the fixed fluid volumes and gas amounts (None: as at the start, set by `unknowns`)
+        self.fixed = {c: (scene.chambers[c].volume if scene.chambers[c].kind is ChamberKind.VOLUME
+                          else scene.chambers[c].amount) for c in self.multiplied}
+
+    def _allowed(self):
+        kinds = {ch.kind for ch in self.scene.chambers}
+        out = [c for c, k in (("volume", ChamberKind.VOLUME), ("gas_amount", ChamberKind.GAS),
+                              ("pressure", ChamberKind.PRESSURE)) if k in kinds]
+        return out + [k for k in self.scene.loads if k.startswith("voltage_")]
+
+    @property
+    def n(self) -> int:
+        return self.scene.n_free + len(self.multiplied)
+
+    # ----------------------------------------------------------------------------------------
+    def state(self, x, lam):
+        sc = self.scene
+        q = sc.reference_state()
+        q[sc.free] = x[: sc.n_free]
+        loads = dict(self.base)
+        for j, c in enumerate(self.multiplied):
+            loads[sc.pressure_name(c)] = float(x[sc.n_free + j])
+        if self.load is not None:
+            loads[self.load] = float(lam)
+        return q, loads
+
+    def x_of(self, q, loads=None):
+        loads = self.base if loads is None else loads
+        return np.concatenate([q[self.scene.free],
+                               [loads[self.scene.pressure_name(c)] for c in self.multiplied]])
+
+    def target(self, c: int, pressure: float, lam: float):
+        """(V_c* [m^3], its derivative dV_c*/dp_c, dV_c*/dlam) of chamber c at pressure p_c."""
+        ch = self.scene.chambers[c]
+        value = lam if c == self.controlled else self.fixed[c]
+        if value is None:
+            raise SnapmemError(f"chamber {c + 1}: its {'volume' if ch.kind is ChamberKind.VOLUME else 'gas amount'} "
+                               "is not set; start the trace from a state, or set it")
+        if ch.kind is ChamberKind.VOLUME:
+            return value, 0.0, 1.0
+        v = gas_volume(pressure, value, ch.p_atm)
+        return v, -gas_compliance(pressure, value, ch.p_atm), 1.0 / (pressure + ch.p_atm)
+
+    def evaluate(self, x, lam, order=2, with_floor=False):
+        sc = self.scene
+        q, loads = self.state(x, lam)
+        ev = sc.evaluate(q, loads, order)
+        k = len(self.multiplied)
+        G = np.empty((sc.n_free, k))
+        rows, D = np.empty(k), np.zeros((k, k))
+        for j, c in enumerate(self.multiplied):
+            G[:, j] = sc.volume_gradient(q, c)
+            p = loads[sc.pressure_name(c)]
+            v_star, dv_dp, _ = self.target(c, p, lam)
+            rows[j] = -(sc.chamber_volume(q, c) - v_star)
+            D[j, j] = -dv_dp
+        F = np.concatenate([ev.residual, rows])
+        J = None if order < 2 else BorderedMatrix(ev.stiffness, -G, -G, -D)
+        return (F, J, ev.residual_floor) if with_floor else (F, J)
+
+    def dF_dlam(self, x, lam):
+        sc = self.scene
+        q, loads = self.state(x, lam)
+        if self.load is not None:
+            return np.concatenate([sc.load_derivative(q, self.load, loads), np.zeros(len(self.multiplied))])
+        d = np.zeros(self.n)
+        j = self.multiplied.index(self.controlled)
+        _, _, dv_dlam = self.target(self.controlled, loads[sc.pressure_name(self.controlled)], lam)
+        d[sc.n_free + j] = dv_dlam
+        return d
+
+    def inadmissible(self, x, lam):
+        q, loads = self.state(x, lam)
+        why = self.scene.inadmissible(q)
+        if why is None:
+            for c in self.multiplied:
+                ch = self.scene.chambers[c]
+                if ch.kind is ChamberKind.GAS and not loads[self.scene.pressure_name(c)] + ch.p_atm > 0:
+                    return f"chamber {c + 1}: absolute gas pressure not positive"
+        return why
+
+    # ----------------------------------------------------------------------------------------
+    def factorise(self, J):
+        lu = J.factor(J.A.factor())
+        return lu, lu
+
+    def stability(self, J, x, lam, n_eigs, start=None, tol=1e-10, sweeps=40, lu=None):
+        """(J's n_eigs eigenvalues nearest zero, the total energy's negative count on the chambers'
+        constraints (Haynsworth, module docstring), their vectors, the iterated subspace)."""
+        if lu is None:
+            lu = J.factor(J.A.factor())
+        eigs, vectors, subspace = eigenvalues_near_zero(J, n_eigs, start, lu, tol, max_iterations=sweeps,
+                                                        subspace=True)
+        negative = getattr(lu.inner, "negative", None)
+        negative = J.A.negative_count() if negative is None else negative
+        k = lu.S.shape[0]
+        if k:
+            negative += int(np.count_nonzero(np.linalg.eigvalsh(0.5 * (lu.S + lu.S.T)) < 0)) - k
+        return eigs, negative, vectors, subspace
+
+    def stiffness(self, J):
+        return J
+
+    def null_mode_borders(self, x, lam, J) -> list:
+        return [self.dF_dlam(x, lam)]
+
+    # ----------------------------------------------------------------------------------------
+    def measures(self, x, lam) -> dict:
+        sc = self.scene
+        q, loads = self.state(x, lam)
+        out = {"pressure": loads.get("pressure", 0.0), "voltage": loads.get("voltage_1", 0.0),
+               "E_hat": sc.e_hat(loads.get("voltage_1", 0.0))}
+        out.update({k: v for k, v in loads.items() if k.startswith("pressure_") or k.startswith("voltage_")})
+        out.update(sc.measures(q, loads))
+        for c, ch in enumerate(sc.chambers):
+            if ch.kind is ChamberKind.GAS:
+                amount = lam if c == self.controlled else self.fixed[c]
+                out["gas_amount" if c == 0 else f"gas_amount_{c + 1}"] = float(amount)
+        return out
+
+    def unknowns(self, q, loads) -> tuple:
+        """(x, lam) of a full state q under ``loads``; fluid volumes and gas amounts not yet set are
+        taken from the state (a fluid's volume V_c(q), a gas' amount (p_c + p_atm) V_c(q))."""
+        sc = self.scene
+        held = {}
+        for c in self.multiplied:
+            ch = sc.chambers[c]
+            v = sc.chamber_volume(q, c)
+            held[c] = v if ch.kind is ChamberKind.VOLUME else (loads[sc.pressure_name(c)] + ch.p_atm) * v
+            if c != self.controlled and self.fixed[c] is None:
+                self.fixed[c] = held[c]
+        lam = loads[self.load] if self.load is not None else held[self.controlled]
+        return self.x_of(q, loads), float(lam)
+
+    def lam_of(self, loads) -> float:
+        if self.load is None:
+            raise SnapmemError(f"control {self.control!r}: the parameter is an output; start from a state")
+        return loads[self.load]
+
+    def start_loads(self, loads: dict) -> dict:
+        return loads
+
+
+def _chamber_problem(scene, control):
+    """The problem of a multi-membrane scene (None for any other scene)."""
+    return ChamberProblem(scene, control) if isinstance(scene, MultiScene) else None
+
+
+PROBLEM_FACTORIES.append(_chamber_problem)

@@ -1,0 +1,257 @@
+"""Several membranes in one scene, coupled only through the chambers they bound.
+
+A :class:`MultiScene` holds membranes (each a :class:`~snapmem.model.scene.Scene` with its own
+meridian, law, thickness, voltage and supports) and :class:`~snapmem.model.chambers.Chamber` s.
+Its state is the membranes' states one after the other, q = (q_1, q_2, ...), and its total
+potential the sum of theirs, each under the pressure of its chamber. The stiffness is therefore
+block diagonal: the membranes' band matrices stacked into one band matrix (no entry couples two
+membranes), so every solve stays O(N) per membrane. A chamber whose pressure is an unknown (a
+fluid or a gas) couples its membranes through one border row and column, the gradient of its
+volume: :mod:`snapmem.continuation.chambers` borders the band matrix with them.
+
+The scene's loads are each chamber's pressure (``pressure`` for the first, ``pressure_2``, ...
+for the others) and each membrane's voltage (``voltage_1``, ``voltage_2``, ... for the membranes
+built with a voltage term). Per-membrane measures carry the membrane's number as a suffix
+(``volume_1``, ``stretch_2``, ``u_max_1``); ``volume`` is the first chamber's total.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from snapmem.errors import SnapmemError, check_real
+from snapmem.kernels.banded import BandedMatrix
+from snapmem.model.chambers import Chamber
+from snapmem.model.scene import Evaluation, Scene
+
+
+class MeridianSet:
+    """The reference meridians of a multi-membrane scene, seen as one: ``size`` (the largest
+    membrane's, the length scale of tolerances and arclengths), ``nodes`` (all of them), ``q``.
+    Not one meridian (``closed`` is None): nothing that needs one curve applies to it."""
+
+    closed = None
+
+    def __init__(self, meridians):
+        self.meridians = tuple(meridians)
+        self.size = max(m.size for m in self.meridians)
+        self.nodes = sum(m.nodes for m in self.meridians)
+        self.q = np.concatenate([m.q for m in self.meridians])
+        self.r = self.z = np.array([1.0])          # not a sphere (see snapmem.continuation.modes)
+
+
+class MultiScene:
+    """Several membranes and the chambers they bound.
+
+    Parameters
+    ----------
+    membranes : sequence of Scene
+        Each with a pressure-work term if it bounds a chamber, and no rigid bodies.
+    chambers : sequence of Chamber
+        Each membrane bounds at most one chamber.
+    name : str
+    parameters : mapping, optional
+        Recorded beside results.
+    """
+
+    start_guess = None
+
+    def __init__(self, membranes: Sequence[Scene], chambers: Sequence[Chamber], name: str = "multi",
+                 parameters: Mapping | None = None):
+        self.membranes = tuple(membranes)
+        self.chambers = tuple(chambers)
+        if not self.membranes:
+            raise SnapmemError("membranes: a multi-membrane scene needs at least one membrane")
+        self.name, self.parameters = name, dict(parameters or {})
+        self.chamber_of = [None] * len(self.membranes)
+        for c, chamber in enumerate(self.chambers):
+            for i, s in zip(chamber.membranes, chamber.signs):
+                if i >= len(self.membranes):
+                    raise SnapmemError(f"chamber {c + 1}: membrane {i} does not exist "
+                                       f"(the scene has {len(self.membranes)})")
+                if self.chamber_of[i] is not None:
+                    raise SnapmemError(f"membrane {i + 1} bounds two chambers; it may bound one")
+                if "pressure" not in self.membranes[i].loads:
+                    raise SnapmemError(f"membrane {i + 1} bounds chamber {c + 1} but has no pressure work")
+                self.chamber_of[i] = (c, s)
+        for i, m in enumerate(self.membranes):
+            if m.bodies:
+                raise SnapmemError(f"membrane {i + 1} has rigid bodies: not supported in a multi-membrane scene")
+        sizes = [m.reference_state().size for m in self.membranes]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        self.free = np.concatenate([m.free + o for m, o in zip(self.membranes, self.offsets)])
+        self.free_offsets = np.concatenate([[0], np.cumsum([m.n_free for m in self.membranes])]).astype(int)
+        self.bandwidth = max(m.bandwidth for m in self.membranes)
+        self.meridian = MeridianSet([m.meridian for m in self.membranes])
+        self.loads = {}
+        for c, chamber in enumerate(self.chambers):
+            self.loads[self.pressure_name(c)] = float(chamber.pressure)
+        for i, m in enumerate(self.membranes):
+            if "voltage" in m.loads:
+                self.loads[f"voltage_{i + 1}"] = float(m.loads["voltage"])
+
+    # ----------------------------------------------------------------------------------------
+    @staticmethod
+    def pressure_name(c: int) -> str:
+        """The load name of chamber c's pressure: ``pressure``, ``pressure_2``, ..."""
+        return "pressure" if c == 0 else f"pressure_{c + 1}"
+
+    @property
+    def terms(self) -> tuple:
+        """Every membrane's energy terms, membrane by membrane."""
+        return tuple(t for m in self.membranes for t in m.terms)
+
+    @property
+    def n_free(self) -> int:
+        return int(self.free.size)
+
+    @property
+    def mu(self) -> float:
+        """The first membrane's shear modulus [Pa] (normalises pressures)."""
+        return self.membranes[0].mu
+
+    @property
+    def thickness(self) -> float:
+        return self.membranes[0].thickness
+
+    @property
+    def permittivity(self):
+        return self.membranes[0].permittivity
+
+    def e_hat(self, voltage: float) -> float:
+        return self.membranes[0].e_hat(voltage)
+
+    @property
+    def force_scale(self) -> float:
+        return max(m.force_scale for m in self.membranes)
+
+    def reference_state(self) -> np.ndarray:
+        return np.concatenate([m.reference_state() for m in self.membranes])
+
+    def split(self, q: np.ndarray) -> list:
+        """The membranes' states (views of q)."""
+        return [q[a:b] for a, b in zip(self.offsets[:-1], self.offsets[1:])]
+
+    def resolve_loads(self, loads: Mapping[str, float] | None) -> dict:
+        out = dict(self.loads)
+        for key, value in (loads or {}).items():
+            if key not in out:
+                raise SnapmemError(f"load {key!r}: this scene has no such load; it has {sorted(out) or 'none'}")
+            out[key] = check_real(key, value)
+        return out
+
+    def membrane_loads(self, i: int, loads: Mapping[str, float]) -> dict:
+        """The loads of membrane i (its own names: ``pressure``, ``voltage``) from the scene's."""
+        own = {}
+        if self.chamber_of[i] is not None:
+            c, s = self.chamber_of[i]
+            own["pressure"] = s * loads[self.pressure_name(c)]
+        if f"voltage_{i + 1}" in loads:
+            own["voltage"] = loads[f"voltage_{i + 1}"]
+        return own
+
+    # ----------------------------------------------------------------------------------------
+    def evaluate(self, q: np.ndarray, loads: Mapping[str, float] | None = None, order: int = 2) -> Evaluation:
+        """Total potential, gradient and block-diagonal band stiffness (one BandedMatrix) at q."""
+        loads = self.resolve_loads(loads)
+        parts = [m.evaluate(qi, self.membrane_loads(i, loads), order)
+                 for i, (m, qi) in enumerate(zip(self.membranes, self.split(q)))]
+        energy = sum(p.energy for p in parts)
+        if order < 1:
+            return Evaluation(energy, None, None, None)
+        gradient = np.concatenate([p.gradient for p in parts])
+        residual = np.concatenate([p.residual for p in parts])
+        stiffness = None
+        if order >= 2:
+            stiffness = stack_bands([p.stiffness for p in parts], self.bandwidth)
+        return Evaluation(energy, gradient, residual, stiffness, max(p.residual_floor for p in parts))
+
+    def energy(self, q, loads=None) -> float:
+        return self.evaluate(q, loads, order=0).energy
+
+    def load_derivative(self, q: np.ndarray, name: str, loads: Mapping[str, float] | None = None) -> np.ndarray:
+        """d(residual)/d(load ``name``) on the free degrees of freedom, shape (n_free,)."""
+        loads = self.resolve_loads(loads)
+        if name not in loads:
+            raise SnapmemError(f"load {name!r}: this scene has no such load; it has {sorted(loads)}")
+        out = np.zeros(self.n_free)
+        for i, (m, qi) in enumerate(zip(self.membranes, self.split(q))):
+            own = self.membrane_loads(i, loads)
+            block = slice(self.free_offsets[i], self.free_offsets[i + 1])
+            if name == f"voltage_{i + 1}":
+                out[block] = m.load_derivative(qi, "voltage", own)
+            elif self.chamber_of[i] is not None and name == self.pressure_name(self.chamber_of[i][0]):
+                out[block] = self.chamber_of[i][1] * m.load_derivative(qi, "pressure", own)
+        return out
+
+    def chamber_volume(self, q: np.ndarray, c: int) -> float:
+        """V_c = V_dead + sum_i s_i V_i [m^3] of chamber c."""
+        chamber = self.chambers[c]
+        parts = self.split(q)
+        return chamber.dead_volume + sum(s * self.membranes[i].volume(parts[i])
+                                         for i, s in zip(chamber.membranes, chamber.signs))
+
+    def volume_gradient(self, q: np.ndarray, c: int) -> np.ndarray:
+        """dV_c/dq on the free degrees of freedom, shape (n_free,) [m^2]."""
+        return -self.load_derivative(q, self.pressure_name(c), {self.pressure_name(c): 0.0})
+
+    def volume(self, q: np.ndarray) -> float:
+        """The first chamber's volume [m^3] (or the first membrane's, without chambers)."""
+        return self.chamber_volume(q, 0) if self.chambers else self.membranes[0].volume(self.split(q)[0])
+
+    # ----------------------------------------------------------------------------------------
+    def inadmissible(self, q: np.ndarray):
+        for i, (m, qi) in enumerate(zip(self.membranes, self.split(q))):
+            why = m.inadmissible(qi)
+            if why is not None:
+                return f"membrane {i + 1}: {why}"
+        for c, chamber in enumerate(self.chambers):
+            if chamber.kind.value == "gas" and not self.chamber_volume(q, c) > 0:
+                return f"chamber {c + 1}: the gas volume is not positive"
+        return None
+
+    def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
+        return min(m.max_step(qi, dqi) for m, qi, dqi in zip(self.membranes, self.split(q), self.split(dq)))
+
+    def measures(self, q: np.ndarray, loads=None) -> dict:
+        """volume (first chamber's total), u_max, stretch_max, min_tension, taut over all membranes,
+        and each membrane's measures with its number as a suffix (``volume_1``, ``stretch_2``)."""
+        loads = self.resolve_loads(loads)
+        own = [m.measures(qi, self.membrane_loads(i, loads))
+               for i, (m, qi) in enumerate(zip(self.membranes, self.split(q)))]
+        out = {"volume": self.volume(q), "u_max": max(o["u_max"] for o in own),
+               "stretch_max": max(o["stretch_max"] for o in own),
+               "min_tension": min(o["min_tension"] for o in own), "taut": all(o["taut"] for o in own)}
+        for c in range(1, len(self.chambers)):
+            out[f"volume_chamber_{c + 1}"] = self.chamber_volume(q, c)
+        for i, o in enumerate(own):
+            out.update({f"{k}_{i + 1}": v for k, v in o.items()})
+        return out
+
+    def __getattr__(self, name):
+        """What a single-membrane Scene has and this one lacks (dynamics, contact, export): one clear error."""
+        if name.startswith("__"):
+            raise AttributeError(name)
+        raise SnapmemError(f"scene {self.__dict__.get('name', 'multi')!r} has several membranes: {name!r} is not "
+                           "available for it yet (statics and continuation are: snapmem trace)")
+
+    def __repr__(self):
+        return (f"MultiScene({self.name!r}, membranes={len(self.membranes)}, "
+                f"chambers={[c.kind.value for c in self.chambers]}, loads={self.loads})")
+
+
+def stack_bands(blocks: Sequence[BandedMatrix], bandwidth: int) -> BandedMatrix:
+    """The block-diagonal matrix of band matrices, as one band matrix of half-bandwidth ``bandwidth``
+    (>= each block's): lower bands side by side, no entry across two blocks."""
+    n = sum(B.n for B in blocks)
+    lower = np.zeros((bandwidth + 1, n))
+    start = 0
+    for B in blocks:
+        own = B.lower()
+        for d in range(min(B.b, bandwidth) + 1):
+            lower[d, start: start + B.n - d] = own[d, : B.n - d]   # entries past the block stay 0
+        start += B.n
+    return BandedMatrix.from_lower(lower, bandwidth)
+

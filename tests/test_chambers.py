@@ -1,0 +1,116 @@
+"""Several membranes coupled through chambers: two balloons under total-volume control against the
+exact one-degree-of-freedom solution (snapmem.reference.two_balloons), and a gas chamber."""
+
+import numpy as np
+import pytest
+
+from snapmem import build_scene
+from snapmem.catalog.chambers import balloon_membrane
+from snapmem.catalog.scenes import get_spec
+from snapmem.continuation import ContinuationOptions, trace
+from snapmem.continuation.switching import switch_at
+from snapmem.model.chambers import Chamber, gas_energy
+from snapmem.model.multi import MultiScene
+from snapmem.reference.exact import balloon_extrema, balloon_pressure
+from snapmem.reference.two_balloons import asymmetric_fold, balloon_volume, pair_stable, symmetric_bifurcations
+
+
+def _pair(nodes):
+    """The symmetric branch through both BPs and the asymmetric half from the first BP to its fold."""
+    scene = build_scene("two_balloons", nodes=nodes)
+    branch = trace(scene, "volume", until={"stretch_max": 2.8})
+    (_, child), *_ = switch_at(scene, "volume", branch.critical_state(0),
+                               options=ContinuationOptions(stop_at_first_limit=True, max_steps=200))
+    return branch, child
+
+
+@pytest.fixture(scope="module")
+def pairs():
+    return {n: _pair(n) for n in (51, 101, 201)}
+
+
+def test_bps_and_fold_match_the_exact_pair_converging_as_N_minus_2(pairs):
+    exact_bps = symmetric_bifurcations()
+    fold = asymmetric_fold()
+    errors = []
+    for n, (branch, child) in pairs.items():
+        bps = branch.points
+        assert list(bps["kind"]) == ["BP", "BP"]
+        assert bool(bps["located"].all())
+        lps = child.points[child.points["kind"] == "LP"]
+        assert len(lps) == 1
+        row = lps.iloc[0]
+        errors.append([abs(bps["control"].iloc[i] / exact_bps[i][0] - 1) for i in range(2)]
+                      + [abs(bps["pressure"].iloc[i] / exact_bps[i][1] - 1) for i in range(2)]
+                      + [abs(row["control"] / fold[0] - 1), abs(row["pressure"] / fold[1] - 1)])
+    errors = np.array(errors)                                   # (3 meshes, 6 quantities)
+    assert np.all(errors[1] < 2e-3)                             # N = 101 within mesh error
+    slopes = np.log(errors[0] / errors[2]) / np.log(201 / 51)
+    assert np.all((slopes > 1.8) & (slopes < 2.3)), slopes
+
+
+def test_asymmetric_branch_is_the_exact_pair_with_its_stability(pairs):
+    branch, child = pairs[101]
+    t = child.table
+    assert t["stretch_1"].iloc[5] != pytest.approx(t["stretch_2"].iloc[5], rel=1e-3)     # left the symmetric branch
+    # p(lam1) = p(lam2) = the branch's pressure, within the mesh error of the balloon curve
+    for k in ("stretch_1", "stretch_2"):
+        assert np.max(np.abs(balloon_pressure(t[k]) / t["pressure"] - 1)) < 2e-3
+    # the total volume is the two balloons' and the table's volume_1 + volume_2
+    assert np.allclose(t["volume"], t["volume_1"] + t["volume_2"], rtol=1e-12)
+    assert np.allclose(t["volume"], t["control"], rtol=1e-9)
+    # stability from p'(V1) + p'(V2) > 0, away from the fold (where it changes)
+    fold_s = float(child.points["s"].iloc[0])
+    away = t[np.abs(t["s"] - fold_s) > 0.1]
+    exact = [pair_stable(a, b) for a, b in zip(away["stretch_1"], away["stretch_2"])]
+    assert len(away) > 10 and list(away["stable"]) == exact
+    # the symmetric branch: stable until the first BP, unstable (one mode) between them, stable after
+    lam_max, lam_min = (lam for lam, _ in balloon_extrema()[:2])
+    s = branch.table
+    between = (s["stretch_1"] > lam_max * 1.01) & (s["stretch_1"] < lam_min * 0.99)
+    outside = (s["stretch_1"] < lam_max * 0.99) | (s["stretch_1"] > lam_min * 1.01)
+    assert (s.loc[between, "negative_eigs"] == 1).all() and (s.loc[outside, "negative_eigs"] == 0).all()
+
+
+def _gas_balloon(dead_volume, nodes=51):
+    """One balloon on a gas reservoir of dead volume ``dead_volume`` [m^3]."""
+    params = get_spec("two_balloons").resolve(nodes=nodes)
+    balloon = balloon_membrane(params, (), 10.0, "balloon")
+    return MultiScene([balloon], [Chamber("gas", (0,), dead_volume=dead_volume, p_atm=0.25)], name="gas_balloon")
+
+
+def test_gas_chamber_obeys_the_gas_law_and_tends_to_pressure_and_volume_control():
+    v_ref = float(balloon_volume(1.0))
+    (lam_max, p_max), _ = balloon_extrema()[:2]
+    # the same mesh under pressure control: its limit point
+    p_lp = trace(build_scene("balloon", nodes=51), "pressure", options=ContinuationOptions(stop_at_first_limit=True)
+                 ).limit_points()["pressure"].iloc[0]
+    assert p_lp == pytest.approx(p_max, rel=1e-3)
+    gaps = []
+    for dead in (0.0, 1e4 * v_ref, 1e5 * v_ref):
+        scene = _gas_balloon(dead)
+        branch = trace(scene, "gas_amount", until={"stretch_max": 2.0})
+        t = branch.table
+        gas = (t["pressure"] + 0.25) * (t["volume"]) / t["gas_amount"] - 1        # (p + p_atm) V_c = n R T
+        assert np.max(np.abs(gas)) < 1e-10
+        assert np.allclose(t["volume"], t["volume_1"] + dead, rtol=1e-12)
+        lps = branch.points[branch.points["kind"] == "LP"]
+        if dead == 0.0:                       # a stiff gas: no snap, stable throughout (as under volume control)
+            assert lps.empty and (t["negative_eigs"] == 0).all()
+        else:                                 # a large reservoir: the pressure-controlled limit point
+            assert len(lps) >= 1
+            gaps.append(abs(lps["pressure"].iloc[0] - p_lp))
+    assert gaps[1] < 0.5 * gaps[0] and gaps[1] < 1e-4 * p_lp, gaps
+
+
+def test_gas_energy_is_stationary_at_the_gas_law():
+    """-dE/dV of E = -nRT ln V + p_atm V is the gauge pressure nRT / V - p_atm."""
+    amount, p_atm, v, h = 3.0, 0.25, 7.0, 1e-5
+    dE = (gas_energy(v + h, amount, p_atm) - gas_energy(v - h, amount, p_atm)) / (2 * h)
+    assert -dE == pytest.approx(amount / v - p_atm, rel=1e-9)
+
+
+def test_bad_control_is_one_clear_error():
+    from snapmem.errors import SnapmemError
+    with pytest.raises(SnapmemError, match="gas"):
+        trace(build_scene("two_balloons", nodes=11), "gas_amount")
