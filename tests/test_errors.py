@@ -117,7 +117,7 @@ def test_fold_without_any_limit_point_is_a_table(capsys):
 
 def test_trace_restart_checks_the_file(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    assert _cli(["trace", "balloon", "--set", "nodes=11", "--max-steps", "5", "--out", "b.csv"], capsys)[0] == 0
+    assert _cli(["trace", "balloon", "--set", "nodes=11", "--max-steps", "5", "--out", "b.csv"], capsys)[0] == 1   # max steps: not reached
     code, _, err = _cli(["trace", "balloon", "--set", "nodes=21", "--restart", "b.npz"], capsys)
     assert code == 2 and "saved with 11 nodes" in err and "has 21" in err and "--set nodes=11" in err
     arrays = dict(np.load("b.npz"))
