@@ -131,7 +131,7 @@ def test_trace_restart_checks_the_file(tmp_path, monkeypatch, capsys):
     code, _, err = _cli(["trace", "balloon", "--set", "nodes=11", "--restart", "no_q.npz"], capsys)
     assert code == 2 and "'q' must be" in err
     code, out, _ = _cli(["trace", "balloon", "--set", "nodes=11", "--max-steps", "5", "--restart", "b.npz"], capsys)
-    assert code == 0 and "status:" in out                                # the good file still restarts
+    assert code == 1 and "status:" in out          # the good file still restarts (5 steps: target not reached)
 
 
 @pytest.mark.parametrize("arrays,words", [

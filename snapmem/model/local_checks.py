@@ -105,7 +105,19 @@ class LocalState:
 def local_state(scene, q: np.ndarray, loads=None, with_tension: bool = True) -> LocalState | None:
     """The ellipticity and tension checks of the scene's membrane at state q [m] under ``loads``
     (resolved or None for the scene's); None if the scene has no membrane energy.
-    ``with_tension``: False leaves the tension out (NaN; a trace has it among its measures)."""
+    ``with_tension``: False leaves the tension out (NaN; a trace has it among its measures).
+    A scene of several membranes (``scene.membranes``) gives its least elliptic membrane's state
+    (edges numbered within that membrane) with the smallest tension over all of them."""
+    if hasattr(scene, "membranes"):
+        loads = scene.resolve_loads(loads)
+        states = [local_state(m, qi, scene.membrane_loads(i, loads), with_tension)
+                  for i, (m, qi) in enumerate(zip(scene.membranes, scene.split(q)))]
+        states = [s for s in states if s is not None]
+        if not states:
+            return None
+        least = min(states, key=lambda s: s.ellipticity)
+        slack = min(states, key=lambda s: s.tension if with_tension else 0.0)
+        return LocalState(least.ellipticity, least.ellipticity_edge, slack.tension, slack.tension_edge, least.stretch)
     kin = scene.kinematics(q)
     dens = scene.density(kin, scene.resolve_loads(loads))
     if dens is None:
