@@ -187,6 +187,15 @@ def cmd_warmup(args) -> int:
     return 0
 
 
+def scene_arguments(p: argparse.ArgumentParser, controls: tuple | None = None) -> None:
+    """The arguments every scene command takes: the scene, ``--set NAME=VALUE`` and, for the
+    branch commands, ``--control`` among ``controls``."""
+    p.add_argument("scene")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
+    if controls is not None:
+        p.add_argument("--control", choices=controls, default="pressure")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="snapmem", description="Snap-through of axisymmetric dielectric-elastomer membranes.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -198,8 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_scenes)
 
     p = sub.add_parser("equilibrium", help="solve one equilibrium, loading from rest")
-    p.add_argument("scene")
-    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
+    scene_arguments(p)
     p.add_argument("--pressure", type=str, help="pressure (inside minus outside), scene units")
     p.set_defaults(func=cmd_equilibrium)
 
@@ -218,9 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("trace", help="trace an equilibrium branch through its limit points")
-    p.add_argument("scene")
-    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
-    p.add_argument("--control", choices=CONTROLS, default="pressure")
+    scene_arguments(p, controls=CONTROLS)
     p.add_argument("--until", action="append", metavar="NAME=VALUE",
                    help="stop when an output reaches a value (default stretch_max=4)")
     p.add_argument("--out", metavar="BRANCH.csv", help="branch table (+ .json parameters, .npz states)")
@@ -252,9 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_fold)
 
     p = sub.add_parser("hysteresis", help="up, snap, down, snap back: a hysteresis loop in one call")
-    p.add_argument("scene")
-    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
-    p.add_argument("--control", choices=LOAD_CONTROLS, default="pressure")
+    scene_arguments(p, controls=LOAD_CONTROLS)
     p.add_argument("--peak", type=real, help="control value reached after the snap (default 1.05 x the limit)")
     p.add_argument("--out", metavar="LOOP.csv", help="the loop's branches (+ LOOP_snaps.csv)")
     p.add_argument("--plot", metavar="FIG.png")
@@ -266,8 +270,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("simulate", help="simulate a scene in time with its schedule (dynamics, contact)")
-    p.add_argument("scene")
-    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="scene parameter (repeatable)")
+    scene_arguments(p)
     p.add_argument("--t-end", type=real, help="end time [s] (default: the scene's)")
     p.add_argument("--scheme", choices=SCHEMES, help="time integrator")
     p.add_argument("--tol", type=real, help="local error tolerance per step (fraction of the size)")

@@ -14,6 +14,20 @@ pd = _lazy.module("pandas")  # imported at first use (start-up)
 from snapmem._version import __version__
 
 
+def fsync_folder(folder) -> None:
+    """Flush a folder's entries to disk (after a rename into it), where the system allows."""
+    try:
+        fd = os.open(os.path.abspath(folder), os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def write_table(table: pd.DataFrame, path, meta: dict | None = None) -> Path:
     """Write ``table`` to CSV at ``path`` and ``meta`` to the JSON sidecar ``path`` + '.json'.
 
@@ -156,13 +170,4 @@ class OutputSet:
         for staged, final in self.staged:
             os.replace(staged, final)
         for folder in {os.path.dirname(os.path.abspath(final)) for _, final in self.staged}:
-            try:
-                fd = os.open(folder, os.O_RDONLY)
-            except OSError:
-                continue
-            try:
-                os.fsync(fd)
-            except OSError:
-                pass
-            finally:
-                os.close(fd)
+            fsync_folder(folder)

@@ -22,6 +22,7 @@ from numbers import Integral, Real
 import numpy as np
 
 from snapmem.errors import SnapmemError
+from snapmem.io.results import fsync_folder
 
 log = logging.getLogger(__name__)
 
@@ -246,23 +247,10 @@ class RowFile:
         finally:
             if os.path.exists(tmp):                  # interrupted before the rename: the old file is whole
                 os.unlink(tmp)
-        _fsync_folder(self.path)
+        fsync_folder(os.path.dirname(os.path.abspath(self.path)))
 
     def close(self):
         os.close(self.fd)
-
-
-def _fsync_folder(path):
-    try:
-        fd = os.open(os.path.dirname(os.path.abspath(path)), os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def meta_path(path) -> str:
