@@ -48,6 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from snapmem.errors import SnapmemError
 from snapmem.model.materials import Density, prestretches, total_density
 
 #: |lam1 - lam2| / lam below which the quotients a and b take their equal-stretch limits (the
@@ -190,19 +191,44 @@ def breakdown_margins(lam1, lam2, voltage: float, thickness: float, limits: Fail
     return strength * thickness / (abs(voltage) * area)
 
 
-def failure_margins(scene, q: np.ndarray, loads=None) -> dict:
-    """The failure columns of state q [m] under ``loads`` (resolved or None): ``breakdown_margin``
-    and ``rupture_margin`` (module docstring; each fails at 1, inf where unchecked)."""
+def _limits(scene) -> FailureLimits:
     limits = scene.__dict__.get("_failure_limits")
     if limits is None:
         limits = scene._failure_limits = FailureLimits.of(scene)
-    if not limits.any:
-        return {"breakdown_margin": np.inf, "rupture_margin": np.inf}
+    return limits
+
+
+#: the outputs :func:`edge_values` gives per edge, each the minimum over edges of a smooth
+#: function of the edge's stretches: name -> the level it fails at
+EDGE_MEASURES = {"breakdown_margin": 1.0, "rupture_margin": 1.0, "min_tension": 0.0, "ellipticity": 0.0}
+
+
+def edge_values(scene, q: np.ndarray, loads, name: str) -> np.ndarray:
+    """Per edge (E,), the quantity whose minimum over the edges is the output ``name`` (one of
+    :data:`EDGE_MEASURES`): E_B / E, stretch_limit / largest total stretch, the smaller principal
+    tension [N/m], the ellipticity margin. ``loads`` resolved or None."""
     kin = scene.kinematics(q)
     lp1, lp2 = scene_prestretches(scene)
-    voltage = scene.resolve_loads(loads).get("voltage", 0.0)
-    breakdown = breakdown_margins(kin.lam1, kin.lam2, voltage, scene.thickness, limits, lp1, lp2)
-    rupture = np.inf
-    if limits.stretch_limit is not None:
-        rupture = limits.stretch_limit / max(lp1 * kin.lam1.max(), lp2 * kin.lam2.max())
-    return {"breakdown_margin": float(breakdown.min()), "rupture_margin": float(rupture)}
+    limits = _limits(scene)
+    if name == "breakdown_margin":
+        voltage = scene.resolve_loads(loads).get("voltage", 0.0)
+        return breakdown_margins(kin.lam1, kin.lam2, voltage, scene.thickness, limits, lp1, lp2)
+    if name == "rupture_margin":
+        if limits.stretch_limit is None:
+            return np.full(kin.lam1.shape, np.inf)
+        return limits.stretch_limit / np.maximum(lp1 * kin.lam1, lp2 * kin.lam2)
+    if name == "min_tension":
+        return np.minimum(*scene.tensions(q, loads))
+    if name == "ellipticity":
+        dens = scene.density(kin, scene.resolve_loads(loads))
+        return ellipticity_margins(lp1 * kin.lam1, lp2 * kin.lam2, total_density(dens, lp1, lp2), scene.mu)
+    raise SnapmemError(f"measure {name!r}: not a per-edge check; must be one of {', '.join(EDGE_MEASURES)}")
+
+
+def failure_margins(scene, q: np.ndarray, loads=None) -> dict:
+    """The failure columns of state q [m] under ``loads`` (resolved or None): ``breakdown_margin``
+    and ``rupture_margin`` (module docstring; each fails at 1, inf where unchecked)."""
+    limits = _limits(scene)
+    if not limits.any:
+        return {"breakdown_margin": np.inf, "rupture_margin": np.inf}
+    return {name: float(edge_values(scene, q, loads, name).min()) for name in ("breakdown_margin", "rupture_margin")}
