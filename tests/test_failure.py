@@ -93,3 +93,25 @@ def test_trajectory_records_the_failure_margins():
     assert margins[k] == pytest.approx(E_b * h / (E_hat * h * np.max(lam1 * lam2)), rel=1e-12)
     t_fail = traj.failure_time("breakdown_margin")
     assert t_fail is not None and margins[traj["t"] < t_fail].min() > 1.0 and margins[-1] < 1.0
+
+
+def test_breakdown_curve_in_pressure_is_the_exact_one():
+    """The EB event of the balloon traced in voltage at p_hat = 0.0095, continued in the pressure:
+    every point has E_hat lam^2 = E_B (exponent 0, mu = eps = 1) and lies on the exact p(lam; E_hat),
+    through the unstable part between the pressure extrema (mesh error at N = 31)."""
+    from snapmem.continuation.event_curves import event_curve
+    lam_eb, p_hat = 1.3, 0.0095
+    E_b = float(balloon_e_hat(lam_eb, p_hat)) * lam_eb ** 2
+
+    def scene_at(p):
+        return build_scene("balloon", nodes=31, pressure=p, with_loads=("voltage",), E_breakdown=E_b)
+
+    branch = trace(scene_at(p_hat), "voltage", until={"stretch": 1.5})
+    eb = next(p for p in branch.states if p.kind == PointKind.EB)
+    curve = event_curve(scene_at, p_hat, eb.x, eb.lam, "breakdown_margin", v_range=(0.004, 0.0135), ds_max=0.2)
+    t = curve.table
+    assert curve.status == "left the range of v" and t["stretch"].max() > 3.0
+    assert not t["stable"].all() and t["stable"].iloc[-1]
+    np.testing.assert_allclose(t["breakdown_margin"], 1.0, atol=1e-9)
+    np.testing.assert_allclose(t["E_hat"] * t["stretch"] ** 2, E_b, rtol=1e-2)
+    np.testing.assert_allclose(t["pressure"], balloon_pressure(t["stretch"], E_hat=t["E_hat"]), atol=4e-5)
