@@ -18,6 +18,7 @@ kink; Newton lands on the new piece.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 from typing import Callable
@@ -25,11 +26,16 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
+from snapmem.continuation.branch import PointKind
+from snapmem.continuation.codim2 import singular_curve
 from snapmem.continuation.problems import make_problem
+from snapmem.continuation.tracer import trace
 from snapmem.errors import SnapmemError, SolverError
 from snapmem.kernels.banded import BorderedMatrix
 from snapmem.model.local_checks import EDGE_MEASURES, edge_values
 from snapmem.model.scene import Scene
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -204,3 +210,67 @@ def event_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray, l
         rows.append({"v": y[-1], "lam": y[-2], "s": s, "iterations": iterations,
                      "stable": None if negative is None else bool(negative == 0), **pb.measures(y[:-2], y[-2])})
     return EventCurve(pd.DataFrame(rows), status, system.iterations, points)
+
+
+#: the event kinds whose curves bound a window, with the output each keeps at its level
+EVENT_MEASURES = {PointKind.EB: "breakdown_margin", PointKind.RU: "rupture_margin", PointKind.LT: "min_tension",
+                  PointKind.LE: "ellipticity"}
+
+
+def failure_window(scene_at: Callable[[float], Scene], v0: float, v_range: tuple, control: str = "voltage",
+                   until: dict | None = None, stretch_max: float | None = None, ds_max: float = 0.1,
+                   max_steps: int = 200, kinds: tuple | None = None,
+                   lam_range: tuple | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The boundaries of an actuation window: the first event of each kind on the branch traced
+    in ``control`` at v0, continued in v both ways over ``v_range``.
+
+    ``kinds``: the event words to continue (e.g. ('EB', 'RU'); default all: EMI or LP, EB, RU,
+    LT, LE); ``lam_range``: the curves stop where the control leaves it. A curve of limit points is the same in the (pressure, voltage) plane whichever of
+    the two is the control, so seeds traced in voltage and in pressure draw one window.
+
+    Limit points (named EMI under voltage control) are followed by
+    :func:`snapmem.continuation.codim2.singular_curve`, the events EB, RU, LT and LE by
+    :func:`event_curve`.
+
+    Returns
+    -------
+    (curves, first) : (pandas.DataFrame, pandas.DataFrame)
+        ``curves``: rows of every boundary (``curve`` its event's name, ``direction``, ``v``,
+        ``lam``, ``stable`` and the measures) after the seed branch itself (``curve`` = 'branch').
+        ``first``: the seed branch's events in the order met (``kind``, ``control``, measures):
+        its first row is the failure that bounds this design first.
+    """
+    branch = trace(scene_at(v0), control, until=until)
+    name_lp = "EMI" if control == "voltage" else "LP"
+    tables = [branch.table.assign(curve="branch", v=v0, direction=0, lam=branch.table["control"])]
+    v_scale = (max(v_range) - min(v_range)) or 1.0
+    seen = set()
+    for point in branch.states:
+        word = name_lp if point.kind == PointKind.LP else point.kind.value
+        if (not point.located or point.kind not in (PointKind.LP, *EVENT_MEASURES) or word in seen
+                or (kinds is not None and word not in kinds)):
+            continue
+        seen.add(word)
+        for direction in (1, -1):
+            try:
+                if point.kind == PointKind.LP:
+                    if point.vectors is None:
+                        continue
+                    phi = point.vectors[:, int(np.argmin(np.abs(point.eigs)))]
+                    curve = singular_curve(scene_at, v0, point.x, point.lam, phi, control, v_range=v_range,
+                                           direction=direction, v_scale=v_scale, ds_max=ds_max, max_steps=max_steps,
+                                           lam_range=lam_range)
+                    name = name_lp
+                else:
+                    curve = event_curve(scene_at, v0, point.x, point.lam, EVENT_MEASURES[point.kind], control,
+                                        v_range=v_range, lam_range=lam_range, direction=direction, v_scale=v_scale,
+                                        ds_max=ds_max, max_steps=max_steps, stretch_max=stretch_max)
+                    name = point.kind.value
+            except SolverError as exc:
+                log.warning("%s curve from %s = %g: %s", point.kind.value, control, point.lam, exc)
+                continue
+            t = curve.table.assign(curve=name, direction=direction, status=curve.status)
+            tables.append(t if direction == 1 else t.iloc[::-1])
+    events = branch.points.sort_values("s")
+    first = events[events["kind"].isin([name_lp, *(k.value for k in EVENT_MEASURES)])].reset_index(drop=True)
+    return pd.concat(tables, ignore_index=True), first
