@@ -115,3 +115,36 @@ def test_breakdown_curve_in_pressure_is_the_exact_one():
     np.testing.assert_allclose(t["breakdown_margin"], 1.0, atol=1e-9)
     np.testing.assert_allclose(t["E_hat"] * t["stretch"] ** 2, E_b, rtol=1e-2)
     np.testing.assert_allclose(t["pressure"], balloon_pressure(t["stretch"], E_hat=t["E_hat"]), atol=4e-5)
+
+
+@pytest.mark.slow
+def test_actuation_window_study_quick(tmp_path):
+    """The study on its small setting: the plate mounted stress-free wrinkles (LT) before it pulls
+    in, and every EB row of the window keeps E_B / E = 1."""
+    study = _study("actuation_window")
+    table, first = study.main(["--quick", "--out", str(tmp_path)])
+    plate = first[first["design"] == "plate lp = 1"]
+    assert plate["kind"].iloc[0] == "LT" and abs(plate["min_tension"].iloc[0]) < 1e-8
+    eb = table[table["curve"] == "EB"]
+    assert len(eb) > 5 and np.allclose(eb["breakdown_margin"], 1.0, atol=1e-8)
+    assert (tmp_path / "actuation_window.png").exists()
+
+
+@pytest.mark.slow
+def test_pump_prestretch_study_quick(tmp_path):
+    """Prestretch 2 raises the pump's snap pressure at 300 V from ~80 Pa to ~386 Pa (N = 31)."""
+    study = _study("pump_prestretch")
+    snaps = study.main(["--quick", "--out", str(tmp_path)]).set_index(["prestretch", "phi"])
+    assert 75.0 < snaps.loc[(1.0, 300.0), "snap_pressure"] < 85.0
+    assert 370.0 < snaps.loc[(2.0, 300.0), "snap_pressure"] < 400.0
+    assert snaps.loc[(2.0, 300.0), "pumped_volume"] > 0.0
+
+
+def _study(name):
+    """A study script as a module (studies/ is not a package)."""
+    import importlib.util
+    from pathlib import Path
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).parents[1] / "studies" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
