@@ -69,3 +69,19 @@ def test_prestretched_balloon_curve_and_limit_point(prestretch):
     assert lps["pressure"].iloc[0] == pytest.approx(p_lp, rel=1e-3)
     assert lps["stretch"].iloc[0] == pytest.approx(lam_lp / lp, rel=2e-3)
     assert p_lp == pytest.approx(lp ** 3 * balloon_limit_point()[1], rel=1e-12)   # 4 H0 / R0 = lp^3 (4 H / R)
+
+
+@pytest.mark.parametrize("bad", [{"prestretch": 0.0}, {"prestretch_2": -1.0}, {"stretch_limit": 0.5},
+                                 {"E_breakdown": 0.0}])
+def test_bad_prestretch_and_limits_are_one_clear_error(bad):
+    from snapmem.errors import SnapmemError
+    name = next(iter(bad))
+    with pytest.raises(SnapmemError, match=name):
+        build_scene("balloon", nodes=11, **bad)
+
+
+def test_unequal_prestretch_is_the_law_at_the_total_stretch():
+    """prestretch_1 and prestretch_2 reach the law as (lp1, lp2); prestretch fills the one not given."""
+    law = build_scene("plate", nodes=11, prestretch=1.4, prestretch_2=1.1).terms[0].law
+    assert isinstance(law, Prestretched) and (law.lp1, law.lp2) == (1.4, 1.1)
+    assert law.mu == pytest.approx(1.0)
