@@ -1,4 +1,4 @@
-"""Actuation windows of a VHB balloon: the (voltage, stretch) and (pressure, voltage) planes bounded
+"""Actuation windows of VHB membranes (balloon, pump plate, torus): the (voltage, stretch) and (pressure, voltage) planes bounded
 by electromechanical instability (EMI), breakdown (EB) and rupture (RU), each boundary a
 continuation of its event in the second parameter (snapmem.continuation.event_curves), not a scan.
 
@@ -22,7 +22,9 @@ Designs (mounted geometry; the law at the total stretch, scene parameter ``prest
   smaller, thicker stress-free one: test_prestretch), seeded twice: the voltage raised at a held
   pressure of 300 Pa (EMI), the pressure raised at a held 2 kV (EB, RU);
 - the pump plate (R = 0.1 m, mounted H = 0.1 mm) mounted at prestretch 1, 2 and 3, the voltage
-  raised at a held pressure of 20 lp^2 Pa, every event on the way continued in the pressure.
+  raised at a held pressure of 20 lp^2 Pa, every event on the way continued in the pressure;
+- the gripper's torus without its rod (Rb = 0.1 m, Rs = 0.02 m, H = 0.1 mm), the voltage raised
+  at 100 Pa and the pressure at 1 kV.
 Each event is followed in the other load both ways. Stretch is ``stretch_max``, the largest
 principal stretch from the mounted state.
 Writes results/actuation_window.csv, results/actuation_window_first.csv and the PNG.
@@ -38,13 +40,16 @@ from snapmem.study import parse_args, save
 EPS0 = 8.854e-12
 VHB = dict(material="gent", mu=5e4, Jlim=110.0, eps=4.5 * EPS0, E_breakdown=35e6, breakdown_exponent=0.565,
            stretch_limit=6.0)
-GEOMETRY = {"balloon": dict(R=0.02, H=2e-4), "pump": {}}
+GEOMETRY = {"balloon": dict(R=0.02, H=2e-4), "pump": {}, "torus": dict(Rb=0.1, Rs=0.02, H=1e-4)}
 # name, scene, prestretch, seeds: (control, held value of the other load, its range, events, until)
 DESIGNS = [("balloon", "balloon", 1.0, [("voltage", 300.0, (0.0, 700.0), ("EMI", "EB", "RU"), {"stretch_max": 3.0}),
                                          ("pressure", 2000.0, (0.0, 6000.0), ("EB", "RU"), {"stretch_max": 6.5})])]
 DESIGNS += [(f"plate lp = {lp:g}", "pump", lp, [("voltage", 20.0 * lp ** 2, (0.0, 200.0 * lp ** 2),
                                                  ("EMI", "EB", "RU", "LT", "LE"), {"stretch_max": 6.0 / lp})])
             for lp in (1.0, 2.0, 3.0)]
+DESIGNS += [("torus", "torus", 1.0, [("voltage", 100.0, (0.0, 400.0), ("EMI", "EB", "RU", "LT", "LE"),
+                                      {"stretch_max": 3.0}),
+                                     ("pressure", 1000.0, (0.0, 3000.0), ("EB", "RU"), {"stretch_max": 6.5})])]
 OTHER = {"voltage": "pressure", "pressure": "voltage"}
 
 
@@ -61,7 +66,8 @@ def main(argv=None):
                                    **GEOMETRY[scene])
 
             table, first = failure_window(scene_at, held, v_range, control, until=until, stretch_max=6.5,
-                                          kinds=kinds, ds_max=0.2, max_steps=60 if args.quick else 120,
+                                          kinds=kinds, ds_max=0.2 if args.quick else 0.1,
+                                          max_steps=60 if args.quick else 200,
                                           lam_range=(0.0, np.inf))
             seed = f"{control} at {OTHER[control]} {held:g}"
             curves.append(table.assign(design=name, prestretch=lp, seed=seed))
