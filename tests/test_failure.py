@@ -148,3 +148,19 @@ def _study(name):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def test_failure_margins_of_many_frames_match_the_single_state_ones():
+    scene = build_scene("balloon", nodes=15, E_hat=0.3, E_breakdown=0.5, breakdown_exponent=0.4, stretch_limit=3.0,
+                        prestretch=1.2)
+    from snapmem.model.local_checks import failure_margins_many
+    rng = np.random.default_rng(3)
+    Q = np.array([scene.meridian.q * s * (1 + 0.02 * rng.standard_normal(scene.meridian.q.size))
+                  for s in (1.0, 1.3, 1.8)])
+    Q[:, 0::2][:, [0, -1]] = 0.0                         # poles on the axis
+    voltages = np.array([0.0, 0.03, -0.05])
+    many = failure_margins_many(scene, Q, voltages)
+    for k in range(3):
+        one = failure_margins(scene, Q[k], {"voltage": voltages[k]})
+        for name in one:
+            assert many[name][k] == pytest.approx(one[name], rel=1e-13)

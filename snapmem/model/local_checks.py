@@ -232,3 +232,31 @@ def failure_margins(scene, q: np.ndarray, loads=None) -> dict:
     if not limits.any:
         return {"breakdown_margin": np.inf, "rupture_margin": np.inf}
     return {name: float(edge_values(scene, q, loads, name).min()) for name in ("breakdown_margin", "rupture_margin")}
+
+
+def failure_margins_many(scene, Q: np.ndarray, voltages: np.ndarray) -> dict:
+    """:func:`failure_margins` of many states at once (a trajectory's frames): Q (T, n_dof) [m],
+    voltages (T,) [V]; arrays (T,). The stretches come straight from the node coordinates, so
+    this costs a few array operations over (T, E), not T assemblies."""
+    limits = _limits(scene)
+    frames = Q.shape[0]
+    if not limits.any:
+        return {"breakdown_margin": np.full(frames, np.inf), "rupture_margin": np.full(frames, np.inf)}
+    m = scene.meridian
+    n = scene.n_node_dofs
+    r, z = Q[:, 0:n:2], Q[:, 1:n:2]
+    a, b = m.edges[:, 0], m.edges[:, 1]
+    lam1 = np.hypot(r[:, b] - r[:, a], z[:, b] - z[:, a]) * m.inverse_length
+    lam2 = 0.5 * (r[:, a] + r[:, b]) * m.inverse_mid_radius
+    lp1, lp2 = scene_prestretches(scene)
+    breakdown = np.full(frames, np.inf)
+    if limits.E_breakdown is not None:
+        voltages = np.abs(np.asarray(voltages, dtype=float))
+        area = lam1 * lam2
+        strength = limits.E_breakdown * (lp1 * lp2 * area) ** limits.breakdown_exponent
+        with np.errstate(divide="ignore"):
+            breakdown = (strength * scene.thickness / area).min(axis=1) / voltages
+    rupture = np.full(frames, np.inf)
+    if limits.stretch_limit is not None:
+        rupture = limits.stretch_limit / np.maximum(lp1 * lam1, lp2 * lam2).max(axis=1)
+    return {"breakdown_margin": breakdown, "rupture_margin": rupture}
