@@ -17,6 +17,7 @@ from snapmem.errors import SnapmemError
 from snapmem.model.constraints import CentreOfMassHeight
 from snapmem.model.dofs import node_areas
 from snapmem.model.materials import LAWS, Law, law_class, law_name
+from snapmem.model.prestretch import Prestretched
 from snapmem.model.meridian import Meridian, disc, sphere, torus
 from snapmem.model.parameters import MAX_NODES, nodes_note
 from snapmem.model.scene import Scene
@@ -66,7 +67,36 @@ def material_parameters(material="mooney_rivlin", c1=0.4375, c2=0.0625, eps=1.0,
            Parameter("voltage", None, voltage_unit, "voltage phi across the thickness (instead of E_hat)"),
            Parameter("eps", eps, eps_unit, "permittivity", minimum=0.0, open_min=True),
            Parameter("pressure", 0.0, pressure_unit, "pressure difference inside minus outside"))
+        + real_membrane_parameters(voltage_unit)
     )
+
+
+def real_membrane_parameters(voltage_unit="V") -> tuple:
+    """Prestretch and failure limits of a real dielectric elastomer (issue 15).
+
+    The meridian and ``H`` are the mounted (prestretched) ones; the law is evaluated at the total
+    stretch relative to the stress-free state (:class:`~snapmem.model.prestretch.Prestretched`).
+    The failure limits are checked by :mod:`snapmem.model.local_checks` (None: not checked).
+    """
+    positive = {"minimum": 0.0, "open_min": True}
+    return (Parameter("prestretch", 1.0, "", "equibiaxial prestretch of the mounted membrane (1: stress-free)",
+                      **positive),
+            Parameter("prestretch_1", None, "", "meridional prestretch (default: prestretch)", **positive),
+            Parameter("prestretch_2", None, "", "hoop prestretch (default: prestretch)", **positive),
+            Parameter("E_breakdown", None, f"{voltage_unit}/m", "breakdown strength of the stress-free "
+                      "material (None: no breakdown check)", **positive),
+            Parameter("breakdown_exponent", 0.0, "", "k of E_B = E_breakdown (area stretch)^k, area stretch "
+                      "from the stress-free state"),
+            Parameter("stretch_limit", None, "", "rupture: largest principal stretch from the stress-free "
+                      "state (None: no check)", minimum=1.0, open_min=True))
+
+
+def mounted_law(params: dict, law: Law) -> Law:
+    """``law`` evaluated at the total stretch of the mounting's prestretches (itself if they are 1)."""
+    lp = params.get("prestretch", 1.0)
+    lp1 = params.get("prestretch_1") or lp
+    lp2 = params.get("prestretch_2") or lp
+    return law if lp1 == 1.0 and lp2 == 1.0 else Prestretched(law, float(lp1), float(lp2))
 
 
 def scene_law(params: dict) -> Law:
@@ -102,7 +132,7 @@ def build_membrane(params: dict, with_loads: tuple, meridian: Meridian, fixed, n
     H = params["H"]
     law = scene_law(params)
     voltage = _voltage(params, law.mu)
-    terms = [Stretching(law), PressureWork()]
+    terms = [Stretching(mounted_law(params, law)), PressureWork()]
     if voltage != 0.0 or "voltage" in with_loads:
         terms.append(Electric(params["eps"], H))
     loads = {"pressure": params["pressure"]}

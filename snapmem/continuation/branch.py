@@ -29,6 +29,9 @@ class PointKind(str, Enum):
     CRITICAL = "critical"    #: a critical point located but not yet classified
     LE = "LE"                #: loss of ellipticity: the membrane model is ill-posed beyond it (the trace ends)
     LT = "LT"                #: loss of tension: a principal tension falls to zero (wrinkling; the trace goes on)
+    EB = "EB"                #: electrical breakdown: ``breakdown_margin`` reaches 1 (the trace goes on)
+    RU = "RU"                #: rupture: ``rupture_margin`` reaches 1, the stretch limit (the trace goes on)
+    EMI = "EMI"              #: electromechanical instability: the name of an LP in tables under voltage control
 
 
 class Outcome(str, Enum):
@@ -105,7 +108,8 @@ class Branch:
     stats: dict = field(default_factory=dict)
 
     def limit_points(self) -> pd.DataFrame:
-        return self.points[self.points["kind"] == PointKind.LP.value]
+        """The limit points (named EMI under voltage control)."""
+        return self.points[self.points["kind"].isin([PointKind.LP.value, PointKind.EMI.value])]
 
     def critical_state(self, k: int) -> Point:
         """The located state of row ``k`` of the points table."""

@@ -11,7 +11,8 @@ earlier).
 
 The tracer builds its events from the options and ``until`` (:func:`events_from`), in this
 order: :class:`CriticalPoints`, :class:`LossOfEllipticity`, :class:`LossOfTension` (recording
-kind LT, not stopping), :class:`SaveAt`, :class:`Until`, :class:`StopAtFirstLimit`, then
+kind LT, not stopping), :class:`ElectricalBreakdown` and :class:`Rupture` (recording EB and RU,
+where the scene sets those limits), :class:`SaveAt`, :class:`Until`, :class:`StopAtFirstLimit`, then
 those passed as ``trace(..., events=[...])``. A new event is a subclass of :class:`Event`; no
 loop changes. For example, to record where the volume crosses V0::
 
@@ -30,7 +31,7 @@ from typing import Callable, Mapping
 from snapmem.continuation.branch import Outcome, Point, PointKind
 from snapmem.continuation.locate import locate_critical, locate_value, touching
 from snapmem.continuation.options import ContinuationOptions
-from snapmem.model.local_checks import LocalState, local_state
+from snapmem.model.local_checks import FailureLimits, LocalState, local_state
 
 
 @dataclass
@@ -235,12 +236,49 @@ class LossOfEllipticity(Event):
         return Found(stop=Stop(Outcome.ELLIPTICITY_LOST, status, at))
 
 
-def events_from(options: ContinuationOptions, until: Mapping[str, float] | None = None) -> list[Event]:
-    """The events ``options`` and ``until`` ask for, in the order the tracer calls them."""
+class FailureMargin(Event):
+    """Where a failure margin (an output that fails at 1: :func:`snapmem.model.local_checks.failure_margins`)
+    falls to 1 between two points: the point there is recorded (of ``kind``) and the trace goes
+    on, so that what lies beyond the failure stays visible (the window of a design)."""
+
+    measure: str = ""
+    kind: PointKind = PointKind.SAVE
+
+    def check(self, step: Step) -> Found | None:
+        def excess(point):
+            return step.output(point, self.measure) - 1.0
+
+        if not excess(step.previous) > 0.0 >= excess(step.new):
+            return None
+        point = step.locate(excess, self.kind)
+        return None if point is None else Found([point])
+
+
+class ElectricalBreakdown(FailureMargin):
+    """EB: the true field reaches the breakdown strength on some edge (``breakdown_margin`` = 1)."""
+
+    measure, kind = "breakdown_margin", PointKind.EB
+
+
+class Rupture(FailureMargin):
+    """RU: the largest total stretch reaches the scene's ``stretch_limit`` (``rupture_margin`` = 1)."""
+
+    measure, kind = "rupture_margin", PointKind.RU
+
+
+def events_from(options: ContinuationOptions, until: Mapping[str, float] | None = None, scene=None) -> list[Event]:
+    """The events ``options`` and ``until`` ask for, in the order the tracer calls them (with
+    ``scene``, the failure events of the limits it sets: :class:`ElectricalBreakdown`,
+    :class:`Rupture`)."""
     events: list[Event] = []
     if options.stability:
         events.append(CriticalPoints())
     events += [LossOfEllipticity(), LossOfTension(stop=False)]
+    limits = FailureLimits() if scene is None else FailureLimits.of(scene)
+    if limits.E_breakdown is not None:
+        events.append(ElectricalBreakdown())
+    if limits.stretch_limit is not None:
+        events.append(Rupture())
     if options.save_at:
         events.append(SaveAt(options.save_at))
     if until:

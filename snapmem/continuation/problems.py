@@ -17,6 +17,7 @@ from snapmem.continuation.options import CONTROLS
 from snapmem.errors import SnapmemError
 from snapmem.kernels.banded import BorderedMatrix, eigenvalues_near_zero
 from snapmem.model.constraints import multiplier_count
+from snapmem.model.local_checks import failure_margins
 from snapmem.model.scene import Scene
 
 
@@ -112,7 +113,8 @@ class LoadProblem:
     def measures(self, x, lam) -> dict:
         q, loads = self.state(x, lam)
         return {"pressure": loads.get("pressure", 0.0), "voltage": loads.get("voltage", 0.0),
-                "E_hat": self.scene.e_hat(loads.get("voltage", 0.0)), **self.scene.measures(q, loads)}
+                "E_hat": self.scene.e_hat(loads.get("voltage", 0.0)), **self.scene.measures(q, loads),
+                **failure_margins(self.scene, q, loads)}
 
     def unknowns(self, q, loads) -> tuple:
         """(x, lam) of the full state q [m] under ``loads`` (resolved)."""

@@ -46,7 +46,7 @@ log = logging.getLogger(__name__)
 
 
 #: the kinds of point listed in a branch's points table (and named in its ``point`` column)
-_SPECIAL = (PointKind.LP, PointKind.BP, PointKind.LE, PointKind.LT)
+_SPECIAL = (PointKind.LP, PointKind.BP, PointKind.LE, PointKind.LT, PointKind.EB, PointKind.RU)
 
 
 class Tracer:
@@ -208,7 +208,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     Branch
     """
     pb = make_problem(scene, control)
-    watch = events_from(options, until) + list(events)
+    watch = events_from(options, until, scene) + list(events)
     tracer = Tracer(pb, options, scene)
     x0, lam0 = _start(scene, pb, start)
     F, J = pb.evaluate(x0, lam0)
@@ -327,21 +327,29 @@ def _assemble(scene, control, pb, points, critical, rejections, status, outcome,
                "min_eig": p.test_value if p.eigs is None else float(p.eigs[0]),
                "negative_eigs": -1 if p.negative is None else int(p.negative),
                "stable": bool(p.negative == 0) if p.negative is not None else None,
-               "point": PointKind(p.kind).value if p.kind in _SPECIAL else "",
+               "point": _kind_word(p.kind, control) if p.kind in _SPECIAL else "",
                "save_at": p.kind == PointKind.SAVE, "ds": p.ds, "iterations": p.iterations}
         rows.append(row)
     table = pd.DataFrame(rows)
     crit_rows = []
     for c in critical:
         m = pb.point_measures(c)
-        crit_rows.append({"kind": PointKind(c.kind).value, "s": c.s, "control": c.lam, **m,
+        crit_rows.append({"kind": _kind_word(c.kind, control), "s": c.s, "control": c.lam, **m,
                           "min_eig": c.test_value, "located": c.located, "coupling": c.coupling,
                           "crossed": c.crossed, "symmetry_broken": c.symmetry_broken, "mode": c.mode})
     points_table = pd.DataFrame(crit_rows, columns=None if crit_rows else
                                 ["kind", "s", "control", "pressure", "voltage", "E_hat", "volume", "u_max",
-                                 "stretch_max", "min_tension", "taut", "min_eig", "located", "coupling",
+                                 "stretch_max", "min_tension", "taut", "breakdown_margin", "rupture_margin", "min_eig", "located", "coupling",
                                  "crossed", "symmetry_broken", "mode"])
     stats = {"steps": int(sum(1 for p in points if p.kind == PointKind.STEP)) - 1, "rejected": len(rejections),
              "newton_iterations": tracer.newton_iterations, "evaluations": tracer.evaluations}
     return Branch(scene, control, table, points_table,
                   pd.DataFrame(rejections, columns=["step", "s", "ds", "reason"]), status, outcome, points, stats)
+
+
+def _kind_word(kind: PointKind, control: str) -> str:
+    """The word of a point's kind in tables: a limit point under voltage control is the
+    electromechanical instability (pull-in), EMI."""
+    if kind == PointKind.LP and control == "voltage":
+        return PointKind.EMI.value
+    return PointKind(kind).value

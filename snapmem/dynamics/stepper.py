@@ -21,6 +21,7 @@ from snapmem.dynamics.compiled_step import CompiledStep
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.trajectory import Trajectory
 from snapmem.model.contact import contact_report, contact_terms
+from snapmem.model.local_checks import failure_margins_many
 from snapmem.model.scene import Evaluation, Scene
 from snapmem.solvers.newton import newton
 
@@ -129,6 +130,7 @@ class _Recorder:
         for name in loads[0]:
             data["load_" + name] = np.array([each[name] for each in loads])
         data.update(contacts)
+        data.update(failure_margins_many(self.scene, data["q"], [each.get("voltage", 0.0) for each in loads]))
         n = self.scene.n_node_dofs
         data["r"], data["z"] = data["q"][:, 0:n:2].copy(), data["q"][:, 1:n:2].copy()
         for i, body in enumerate(self.scene.bodies):

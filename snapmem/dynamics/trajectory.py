@@ -20,7 +20,9 @@ class Trajectory:
         ``newton`` (iterations of the step), ``min_gap`` [m] (smallest contact gap over all
         accepted steps since the previous frame; inf without contact), and for each contact
         ``<body>_force`` [N] and ``<body>_gap`` [m], for each rigid body ``<name>_z`` [m] and
-        ``<name>_v`` [m/s].
+        ``<name>_v`` [m/s], and the failure margins ``breakdown_margin`` and ``rupture_margin``
+        (each fails at 1, inf where the scene sets no limit:
+        :func:`snapmem.model.local_checks.failure_margins`).
     meta : dict
         Scene name and parameters, scheme, rho, damping, step and iteration counts, wall time.
     """
@@ -56,6 +58,23 @@ class Trajectory:
         rate = np.abs(np.diff(y) / np.maximum(np.diff(t), 1e-300))
         i = int(np.argmax(rate))
         return float(0.5 * (t[i] + t[i + 1]))
+
+    def failure_time(self, margin: str = "breakdown_margin") -> float | None:
+        """The time [s] a failure margin (``breakdown_margin``, ``rupture_margin``) first reaches 1,
+        interpolated linearly between the two frames around it (the EB and RU events of a run);
+        None if it never does (or the trajectory has no such column)."""
+        values = self.data.get(margin)
+        if values is None:
+            return None
+        t = self.data["t"]
+        below = np.flatnonzero(values <= 1.0)
+        if below.size == 0:
+            return None
+        i = int(below[0])
+        if i == 0 or not np.isfinite(values[i - 1]):
+            return float(t[i])
+        w = (values[i - 1] - 1.0) / (values[i - 1] - values[i])
+        return float(t[i - 1] + w * (t[i] - t[i - 1]))
 
 
 def _json_default(x):
