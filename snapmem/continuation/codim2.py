@@ -23,6 +23,18 @@ special points are located:
 The curve of a BP whose mode breaks no symmetry of the energy to third order (a transcritical
 one, e.g. the inflated sphere's P2 mode) is a regular solution of the same system, so BP curves
 are traced by the same function from a located BP.
+
+A BP the mesh makes imperfect (its mode couples to the load at discretisation order) is
+reported at the perfect problem's BP (snapmem.continuation.unfold), a state with the residual
+R = -sigma psi. From such a start the curve is that of the unfolding system in (x, lam, sigma, v):
+
+    R(x, lam; v) + sigma psi = 0,   g = 0,   h = w . R_lam / |R_lam|_0 = 0,
+
+psi = -R / |R| fixed at the start, w the bordered null vector; the Jacobian is K bordered by the
+columns R_lam, psi, R_v and the rows g_x, h_x (h_x = (D_w R_lam) - (D_w K) z with
+[[K, phi], [phi^T, 0]] [z; .] = [R_lam; 0], central differences along w) and the arclength's, so
+each step stays O(N), and the curve converges at the discretisation order, as the unfolded BP
+does, not at half of it as the mesh's singular points near it (discrete folds) do.
 """
 
 from __future__ import annotations
@@ -254,7 +266,10 @@ def singular_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray
     scene_at : callable
         v -> Scene (the same degrees of freedom for every v).
     v0, x0, lam0, phi0 : a singular point and its (approximate) null vector, e.g. a located LP
-        or BP of a traced branch.
+        or BP of a traced branch. If (x0, lam0) is not an equilibrium but an unfolded BP (its
+        residual R = -sigma psi within unfold.IMPERFECTION_LIMIT of the load's force, its null
+        vector orthogonal to R_lam), the curve is that of the unfolding system (module docstring)
+        and its table has the columns ``sigma`` [N] and ``imperfection`` (|sigma| / |lam R_lam|).
     control : str
         The branch's control parameter ('pressure', 'voltage', 'E_hat').
     v_range : (v_min, v_max), optional
