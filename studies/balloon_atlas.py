@@ -61,17 +61,18 @@ def main(argv=None):
 
 def draw(table, path):
     """Two panels from the CSV: the (E_hat, p) atlas and the fold curve through its cusp in c2/c1."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, (ax, bx, tx) = plt.subplots(1, 3, figsize=(15, 4.4), gridspec_kw={"width_ratios": [1.6, 1, 1]})
+    from snapmem.viz.style import pyplot
+    plt = pyplot()
+    fig, (ax, bx, tx) = plt.subplots(1, 3, figsize=(15, 5.2), gridspec_kw={"width_ratios": [1.6, 1, 1]})
+    below = dict(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)       # legends outside the data
     e = table[table["plane"] == "E_hat"]
     styles = {"LP max": "C0", "LP min": "C4", "BP P1": "C1", "BP P2": "C2"}
+    names = {"BP P1": "BP P1 (pole held: exact BP)", "BP P2": "BP P2 (unfolded: perfect problem's BP)"}
     for name, colour in styles.items():
         for _, part in e[(e["curve"] == name) & (e["kind"].fillna("") == "")].groupby("direction"):
             part = part.sort_values("v")
             ax.plot(part["v"], 1e3 * part["pressure"], "-", color=colour, lw=1.8,
-                    label=name if part["direction"].iloc[0] == 1 else None)
+                    label=names.get(name, name) if part["direction"].iloc[0] == 1 else None)
             ax.plot(part["v"], 1e3 * part["pressure_exact"], ":", color="k", lw=1)
     le = e[e["curve"] == "LE"]
     ax.plot(le["v"], 1e3 * le["pressure"], "kx", ms=8, label="LE located on traced branches")
@@ -87,7 +88,7 @@ def draw(table, path):
     ax.set_xlabel(r"normalised voltage $\hat E$")
     ax.set_ylabel(r"pressure $\hat p \times 10^3$")
     ax.set_title("DE balloon: limit and bifurcation curves")
-    ax.legend(fontsize=8, loc="lower left")
+    ax.legend(**below)
     c = table[(table["plane"] == "c2")]
     curve = c[c["kind"].fillna("") == ""]
     for _, part in curve.groupby("direction"):
@@ -101,7 +102,7 @@ def draw(table, path):
     bx.set_xlabel(r"$c_2/c_1$ ($\mu = 2(c_1 + c_2)$ fixed)")
     bx.set_ylabel(r"limit pressure $\hat p \times 10^3$")
     bx.set_title(r"LP curve through its cusp ($\hat E = 0$)")
-    bx.legend(fontsize=8, loc="upper left")
+    bx.legend(**below)
     torus = table[(table["plane"] == "aspect_ratio") & (table["kind"].fillna("") == "")]
     for _, part in torus.groupby("direction"):
         part = part.sort_values("v")
@@ -111,7 +112,7 @@ def draw(table, path):
     tx.set_ylabel(r"limit pressure $\hat p \times 10^3$")
     tx.set_title(r"torus counterpart: LP curve ($\hat E = 0$)")
     fig.tight_layout()
-    fig.savefig(path, dpi=130)
+    fig.savefig(path, dpi=130, bbox_inches="tight")
     plt.close(fig)
 
 

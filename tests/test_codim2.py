@@ -75,19 +75,34 @@ def test_bifurcation_points_converge_to_the_criterion_roots():
     assert order[1] > 0.9                  # P2 under the held pole: first order (a mesh asymmetry)
 
 
-def test_bp_curve_follows_the_criterion_in_e_hat():
-    """The pear-shaped (P2) BP followed in E_hat by arclength stays within the mesh error of the
-    criterion's root at every E_hat (the error at N = 81 is first order, ~ 0.05 in stretch)."""
-    at = lambda E: build_scene("balloon", nodes=81, E_hat=E)      # noqa: E731
+def _p2_bp_curve(N):
+    """The pear-shaped (P2) BP of the N-node balloon at E_hat = 0.4 followed in E_hat to 0.48."""
+    at = lambda E: build_scene("balloon", nodes=N, E_hat=E)      # noqa: E731
     branch = trace(at(0.4), "pressure", until={"stretch": 3.2})
     start = min((p for p in branch.states if p.kind.value in ("LP", "BP")), key=lambda p: abs(_stretch(branch, p) - 2.95))
     phi = start.vectors[:, np.argmin(np.abs(start.eigs))]
-    curve = singular_curve(at, 0.4, start.x, start.lam, phi, v_range=(0.4, 0.48), v_scale=0.1)
-    t = curve.table
-    assert t["v"].max() > 0.48 and len(t) >= 5
-    exact_stretch = np.array([exact.sphere_bifurcation_stretches(2, E_hat=v)[0] for v in t["v"]])
-    assert np.all(np.abs(t["stretch"] - exact_stretch) < 0.06)
-    assert np.all(np.diff(t["stretch"]) < 0)                # higher voltage, earlier bifurcation
+    return start, singular_curve(at, 0.4, start.x, start.lam, phi, v_range=(0.4, 0.48), v_scale=0.1)
+
+
+def test_bp_curve_follows_the_criterion_in_e_hat():
+    """The pear-shaped (P2) BP, reported at its unfolded point (the mesh breaks its symmetry),
+    followed in E_hat by arclength on the unfolding system R + sigma psi = 0: the curve matches
+    the criterion's root at every E_hat to second order (max error 6.7e-3 at N = 41, 1.7e-3 at
+    N = 81: 4.0x), while the imperfection sigma stays O(h^2)."""
+    errors, imperfections = [], []
+    for N in (41, 81):
+        start, curve = _p2_bp_curve(N)
+        assert start.kind.value == "BP" and start.symmetry_broken and start.mode == 2
+        t = curve.table
+        assert curve.status == "left the range of v" and t["v"].max() > 0.48 and len(t) >= 5
+        exact_stretch = np.array([exact.sphere_bifurcation_stretches(2, E_hat=v)[0] for v in t["v"]])
+        errors.append(np.max(np.abs(t["stretch"] - exact_stretch)))
+        imperfections.append(t["imperfection"].max())
+        assert t["imperfection"].iloc[0] == pytest.approx(start.measured["imperfection"], rel=1e-6)
+        assert np.all(np.diff(t["stretch"]) < 0)            # higher voltage, earlier bifurcation
+    assert errors[1] < 2.5e-3                                # 1.67e-3 (the mesh's fold: ~0.05)
+    assert errors[0] / errors[1] > 3.5                       # second order: 3.99
+    assert imperfections[0] / imperfections[1] > 3.5         # sigma = O(h^2): 2.5e-4, 6.3e-5
 
 
 def test_limit_pressure_sensitivities():
@@ -133,7 +148,8 @@ def test_cli_trace_sensitivity(tmp_path):
 
 def test_balloon_atlas_study_quick(tmp_path):
     """studies/balloon_atlas.py --quick: every curve lies on the exact sphere's (LP curves to
-    2e-3, BP curves within the first-order mesh error at N = 31), and the cusp is located."""
+    2e-3, BP curves to 6e-5 in pressure at N = 31: the P2 curve is that of the unfolded BP, the
+    P1 curve (pole held: an exact BP) that of R = 0), and the cusp is located."""
     import importlib.util
     from pathlib import Path
     path = Path(__file__).resolve().parents[1] / "studies" / "balloon_atlas.py"
@@ -146,7 +162,9 @@ def test_balloon_atlas_study_quick(tmp_path):
     lp = table["curve"].str.startswith("LP") & (table["plane"] == "E_hat")
     assert rel[lp].max() < 2e-3                          # second order: 1.4e-3 at N = 31, 1.9e-4 at 81
     bp = table["curve"].str.startswith("BP") & (table["v"] >= 0.37)     # off the P1 curve's vertical asymptote
-    assert (table["pressure"] - table["pressure_exact"])[bp].abs().max() < 5e-4      # 2.8e-4 at N = 31
+    assert (table["pressure"] - table["pressure_exact"])[bp].abs().max() < 6e-5      # 2.5e-5 at N = 31
+    p1, p2 = (table[table["curve"] == name] for name in ("BP P1", "BP P2"))
+    assert p2["imperfection"].gt(0).all() and p1["imperfection"].isna().all()    # unfolded / exact BP curve
     cusp = table[table["kind"] == "CP"]
     assert len(cusp) == 1 and cusp["v"].iloc[0] / 0.4375 == pytest.approx(exact.balloon_cusp_mooney_rivlin()[0], rel=2e-3)
     torus = table[(table["plane"] == "aspect_ratio") & (table["v"] == 0.2)]      # the seed of the torus curve

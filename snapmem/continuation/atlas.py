@@ -4,6 +4,8 @@ codimension-2 points and where the membrane model stops being valid, all by cont
 Each curve starts from a critical point located on a traced branch (a *seed*) and is followed
 in the second parameter by pseudo-arclength (:func:`snapmem.continuation.codim2.singular_curve`),
 both ways, until it leaves the parameter range, passes a stretch bound or loses ellipticity.
+A seed that is an unfolded BP (the mesh breaks its symmetry) is followed on the unfolding system
+(its rows carry ``sigma`` and ``imperfection``), so its curve converges at second order.
 Loss-of-ellipticity points are the ends of branches traced at given values (each located by the
 trace's LE event).
 """

@@ -23,6 +23,18 @@ special points are located:
 The curve of a BP whose mode breaks no symmetry of the energy to third order (a transcritical
 one, e.g. the inflated sphere's P2 mode) is a regular solution of the same system, so BP curves
 are traced by the same function from a located BP.
+
+A BP the mesh makes imperfect (its mode couples to the load at discretisation order) is
+reported at the perfect problem's BP (snapmem.continuation.unfold), a state with the residual
+R = -sigma psi. From such a start the curve is that of the unfolding system in (x, lam, sigma, v):
+
+    R(x, lam; v) + sigma psi = 0,   g = 0,   h = w . R_lam / |R_lam|_0 = 0,
+
+psi = -R / |R| fixed at the start, w the bordered null vector; the Jacobian is K bordered by the
+columns R_lam, psi, R_v and the rows g_x, h_x (h_x = (D_w R_lam) - (D_w K) z with
+[[K, phi], [phi^T, 0]] [z; .] = [R_lam; 0], central differences along w) and the arclength's, so
+each step stays O(N), and the curve converges at the discretisation order, as the unfolded BP
+does, not at half of it as the mesh's singular points near it (discrete folds) do.
 """
 
 from __future__ import annotations
@@ -37,6 +49,7 @@ import pandas as pd
 from scipy.optimize import brentq
 
 from snapmem.continuation.problems import make_problem
+from snapmem.continuation.unfold import IMPERFECTION_LIMIT
 from snapmem.errors import SnapmemError, SolverError
 from snapmem.kernels.banded import BorderedMatrix
 from snapmem.model.scene import Scene
@@ -51,7 +64,9 @@ MODE_OVERLAP = 0.9
 @dataclass
 class SingularPoint:
     """A point of a curve of singular points: unknowns x, control lam, second parameter v, the
-    null vector phi, the unit tangent (x, lam, v parts), the normal-form coefficient a."""
+    null vector phi, the unit tangent (x, lam, (sigma,) v parts), the normal-form coefficient a;
+    on the curve of an unfolded BP, sigma [N] is the size of the imperfection force sigma psi
+    that makes its bifurcation perfect (R(x, lam; v) = -sigma psi)."""
 
     x: np.ndarray
     lam: float
@@ -62,6 +77,12 @@ class SingularPoint:
     s: float = 0.0
     iterations: int = 0
     kind: str = ""
+    sigma: float | None = None
+
+    def unknowns(self) -> np.ndarray:
+        """y = (x, lam, v), or (x, lam, sigma, v) on the curve of an unfolded BP."""
+        extra = [self.lam, self.v] if self.sigma is None else [self.lam, self.sigma, self.v]
+        return np.concatenate([self.x, extra])
 
 
 @dataclass
@@ -77,9 +98,15 @@ class SingularCurve:
 
 
 class _System:
-    """The extended system of one curve: evaluation, derivatives and the corrector."""
+    """The extended system of one curve: evaluation, derivatives and the corrector.
 
-    def __init__(self, scene_at: Callable[[float], Scene], control: str, v0: float, v_scale: float):
+    The unknowns are y = (x, lam, v), or y = (x, lam, sigma, v) for an unfolded BP (``psi``
+    given: the mesh's imperfect BP moved to the perfect problem's, snapmem.continuation.unfold),
+    whose equations are R + sigma psi = 0, g = 0 and h = w . R_lam / |R_lam|_0 = 0 (w the
+    bordered null vector). Either way the Jacobian is K bordered by a few columns and rows."""
+
+    def __init__(self, scene_at: Callable[[float], Scene], control: str, v0: float, v_scale: float,
+                 psi: np.ndarray | None = None, x0: np.ndarray | None = None, lam0: float = 0.0):
         self.scene_at, self.control = scene_at, control
         self._problems: dict = {}
         pb = self.problem(v0)
@@ -87,7 +114,20 @@ class _System:
         self.L = pb.scene.meridian.size
         self.wx, self.wl, self.wv = pb.x_weight, 1.0 / pb.lam_scale ** 2, 1.0 / v_scale ** 2
         self.lam_scale, self.v_scale = pb.lam_scale, v_scale
+        self.psi = psi
+        if psi is None:
+            self.w_extra = np.array([self.wl, self.wv])
+        else:                                     # one fixed scale of h and of sigma: the load's force at the start
+            load = pb.dF_dlam(x0, lam0)
+            self.load_scale = float(np.linalg.norm(load)) or 1.0
+            sigma_scale = float(np.linalg.norm(lam0 * load)) or 1.0
+            self.w_extra = np.array([self.wl, 1.0 / sigma_scale ** 2, self.wv])
         self.iterations = 0
+
+    @property
+    def extra(self) -> int:
+        """Unknowns beside x: (lam, v), or (lam, sigma, v) for an unfolded BP."""
+        return self.w_extra.size
 
     def problem(self, v):
         """The problem at v (the last few cached: each Newton iteration asks for v and v +- h)."""
@@ -98,7 +138,8 @@ class _System:
         return self._problems[v]
 
     def g_of(self, pb, x, lam, phi):
-        """(g, v, K, R): the bordered test function and its vector at (x, lam) of problem pb."""
+        """(g, w, K, R, lu): the bordered test function and its vector at (x, lam) of problem pb,
+        and the factorisation of the bordered matrix [[K, phi], [phi^T, 0]]."""
         F, K = pb.evaluate(x, lam)
         lu = BorderedMatrix(K, phi, phi, [[0.0]]).factor()
         if lu.singular:
@@ -106,62 +147,102 @@ class _System:
         rhs = np.zeros(K.n + 1)
         rhs[-1] = 1.0
         sol = lu.solve(rhs)
-        return sol[-1], sol[:-1], K, F
+        return sol[-1], sol[:-1], K, F, lu
 
-    def linearise(self, x, lam, v, phi):
-        """(F, J, w, K): the residual [R; g], the Jacobian's blocks, the test function's vector."""
+    def h_of(self, pb, x, lam, w):
+        """The unfolded BP condition h = w . R_lam / |R_lam|_0 (zero where the null vector does
+        not couple to the load: a bifurcation, not a fold)."""
+        return float(w @ pb.dF_dlam(x, lam)) / self.load_scale
+
+    def linearise(self, y, phi):
+        """(F, blocks, w): the residual [R (+ sigma psi); g (; h)], the Jacobian's blocks
+        (K, B, C, D: columns B of the extra unknowns, rows C^T | D of the extra equations) and
+        the test function's vector w, at y with the border phi."""
+        n = y.size - self.extra
+        x, lam, v = y[:n], y[n], y[-1]
         pb = self.problem(v)
-        g, w, K, R = self.g_of(pb, x, lam, phi)
+        g, w, K, R, lu = self.g_of(pb, x, lam, phi)
         eps = 1e-6 * self.L / max(np.max(np.abs(w)), 1e-300)
-        g_x = -(pb.evaluate(x + eps * w, lam)[1].matvec(w) - pb.evaluate(x - eps * w, lam)[1].matvec(w)) / (2 * eps)
+        K_plus, K_minus = pb.evaluate(x + eps * w, lam)[1], pb.evaluate(x - eps * w, lam)[1]
+        g_x = -(K_plus.matvec(w) - K_minus.matvec(w)) / (2 * eps)
         dl = 1e-6 * max(abs(lam), pb.lam_scale)
-        g_l = -(pb.evaluate(x, lam + dl)[1].matvec(w) - pb.evaluate(x, lam - dl)[1].matvec(w)) @ w / (2 * dl)
+        Kl_plus, Kl_minus = pb.evaluate(x, lam + dl)[1], pb.evaluate(x, lam - dl)[1]
+        g_l = -(Kl_plus.matvec(w) - Kl_minus.matvec(w)) @ w / (2 * dl)
         h = 1e-6 * max(abs(v), self.v_scale)
         plus, minus = self.problem(v + h), self.problem(v - h)
         R_v = (plus.evaluate(x, lam, order=1)[0] - minus.evaluate(x, lam, order=1)[0]) / (2 * h)
-        g_v = (self.g_of(plus, x, lam, phi)[0] - self.g_of(minus, x, lam, phi)[0]) / (2 * h)
-        return np.append(R, g), (K, np.column_stack([pb.dF_dlam(x, lam), R_v]), g_x, g_l, g_v), w
+        at_plus, at_minus = self.g_of(plus, x, lam, phi), self.g_of(minus, x, lam, phi)
+        g_v = (at_plus[0] - at_minus[0]) / (2 * h)
+        R_lam = pb.dF_dlam(x, lam)
+        if self.psi is None:
+            return (np.append(R, g), (K, np.column_stack([R_lam, R_v]), g_x[:, None], np.array([[g_l, g_v]])), w)
+        # h = w . R_lam: d(w . R_lam) = w . dR_lam - z . (dK w), z = [[K, phi], [phi^T, 0]]^-1 [R_lam; 0]
+        z = lu.solve(np.append(R_lam, 0.0))[:-1]
+        h_x = ((pb.dF_dlam(x + eps * w, lam) - pb.dF_dlam(x - eps * w, lam))
+               - (K_plus.matvec(z) - K_minus.matvec(z))) / (2 * eps * self.load_scale)
+        h_l = (w @ (pb.dF_dlam(x, lam + dl) - pb.dF_dlam(x, lam - dl))
+               - z @ (Kl_plus.matvec(w) - Kl_minus.matvec(w))) / (2 * dl * self.load_scale)
+        h_v = (self.h_of(plus, x, lam, at_plus[1]) - self.h_of(minus, x, lam, at_minus[1])) / (2 * h)
+        sigma = y[n + 1]
+        F = np.concatenate([R + sigma * self.psi, [g, self.h_of(pb, x, lam, w)]])
+        return F, (K, np.column_stack([R_lam, self.psi, R_v]), np.column_stack([g_x, h_x]),
+                   np.array([[g_l, 0.0, g_v], [h_l, 0.0, h_v]])), w
 
     def solve(self, blocks, row, rhs):
-        K, B, g_x, g_l, g_v = blocks
-        C = np.column_stack([g_x, self.wx * row[:-2]])
-        D = [[g_l, g_v], [self.wl * row[-2], self.wv * row[-1]]]
+        """The extended Jacobian (the arclength row ``row`` appended) solved for rhs: O(N)."""
+        K, B, C, D = blocks
+        m = self.extra
+        C = np.column_stack([C, self.wx * row[:-m]])
+        D = np.vstack([D, self.w_extra * row[-m:]])
         lu = BorderedMatrix(K, B, C, D).factor()
         if lu.singular:
             raise SolverError("singular extended Jacobian of the singular-point curve")
         return lu.solve(rhs)
 
     def inner(self, a, b):
-        return float(a[:-2] @ (self.wx * b[:-2]) + self.wl * a[-2] * b[-2] + self.wv * a[-1] * b[-1])
+        m = self.extra
+        return float(a[:-m] @ (self.wx * b[:-m]) + np.sum(self.w_extra * a[-m:] * b[-m:]))
 
     def tangent(self, blocks, previous):
-        rhs = np.zeros(blocks[0].n + 2)
+        rhs = np.zeros(blocks[0].n + self.extra)
         rhs[-1] = 1.0
         t = self.solve(blocks, previous, rhs)
         t /= math.sqrt(self.inner(t, t))
         return t if self.inner(t, previous) > 0 else -t
 
+    def converged(self, F, n) -> bool:
+        """R (+ sigma psi) within tol, and for an unfolded BP h too (g needs no test of its own:
+        the Newton step that brought R there was quadratic in it)."""
+        return np.max(np.abs(F[:n])) <= self.tol and (self.psi is None or abs(F[-1]) <= 1e-9)
+
+    def point(self, y, phi, w, blocks, iterations=0) -> SingularPoint:
+        """The SingularPoint at y (its null vector w / |w|, normal-form coefficient a)."""
+        n = y.size - self.extra
+        p = SingularPoint(y[:n], y[n], y[-1], phi, iterations=iterations,
+                          sigma=float(y[n + 1]) if self.psi is not None else None)
+        p.a = -float(blocks[2][:, 0] @ phi) / np.linalg.norm(w) ** 2
+        return p
+
     def correct(self, base: SingularPoint, ds: float, max_iterations: int = 10) -> SingularPoint:
-        """Newton on [R; g; <t, y - y0> - ds] from base + ds t."""
+        """Newton on [R (+ sigma psi); g (; h); <t, y - y0> - ds] from base + ds t."""
         t = base.tangent
-        y0 = np.concatenate([base.x, [base.lam, base.v]])
+        y0 = base.unknowns()
         y = y0 + ds * t
+        n = base.x.size
         phi = base.phi
         for it in range(max_iterations):
-            x, lam, v = y[:-2], y[-2], y[-1]
-            pb = self.problem(v)
-            if pb.inadmissible(x, lam) is not None:
+            pb = self.problem(y[-1])
+            if pb.inadmissible(y[:n], y[n]) is not None:
                 raise SolverError("left the model's domain")
-            F, blocks, w = self.linearise(x, lam, v, phi)
+            F, blocks, w = self.linearise(y, phi)
             arc = self.inner(t, y - y0) - ds
-            if np.max(np.abs(F[:-1])) <= self.tol and abs(arc) <= 1e-12 and it > 0:
+            if self.converged(F, n) and abs(arc) <= 1e-12 and it > 0:
                 phi = w / np.linalg.norm(w)
                 if abs(phi @ base.phi) < MODE_OVERLAP:
                     raise SolverError(f"the null vector turned (overlap {abs(phi @ base.phi):.2f}): "
                                       "another singular curve")
-                point = SingularPoint(x, lam, v, phi, iterations=it)
+                point = self.point(y, phi, w, blocks, it)
                 point.tangent = self.tangent(blocks, t)
-                point.a = -float(blocks[2] @ phi) / np.linalg.norm(w) ** 2
                 return point
             d = self.solve(blocks, t, -np.append(F, arc))
             self.iterations += 1
@@ -185,7 +266,10 @@ def singular_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray
     scene_at : callable
         v -> Scene (the same degrees of freedom for every v).
     v0, x0, lam0, phi0 : a singular point and its (approximate) null vector, e.g. a located LP
-        or BP of a traced branch.
+        or BP of a traced branch. If (x0, lam0) is not an equilibrium but an unfolded BP (its
+        residual R = -sigma psi within unfold.IMPERFECTION_LIMIT of the load's force, its null
+        vector orthogonal to R_lam), the curve is that of the unfolding system (module docstring)
+        and its table has the columns ``sigma`` [N] and ``imperfection`` (|sigma| / |lam R_lam|).
     control : str
         The branch's control parameter ('pressure', 'voltage', 'E_hat').
     v_range : (v_min, v_max), optional
@@ -213,15 +297,17 @@ def singular_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray
     if control == "volume":
         raise SnapmemError("control = 'volume': follow limit points in a load control")
     v_scale = v_scale or (abs(v0) if v0 != 0 else 1.0)
-    system = _System(scene_at, control, v0, v_scale)
-    F, blocks, w = system.linearise(x0, lam0, v0, phi0 / np.linalg.norm(phi0))
-    first = SingularPoint(x0, lam0, v0, w / np.linalg.norm(w))
-    row = np.zeros(x0.size + 2)
+    system = _start_system(scene_at, control, v0, v_scale, x0, lam0)
+    phi0 = phi0 / np.linalg.norm(phi0)
+    y0 = np.concatenate([x0, [lam0], [] if system.psi is None else [_sigma_at(system, v0, x0, lam0)], [v0]])
+    F, blocks, w = system.linearise(y0, phi0)
+    first = system.point(y0, w / np.linalg.norm(w), w, blocks)
+    row = np.zeros(y0.size)
     row[-1] = direction
     first.tangent = system.tangent(blocks, row)
-    first.a = -float(blocks[2] @ first.phi) / np.linalg.norm(w) ** 2
-    if np.max(np.abs(F[:-1])) > 1e3 * system.tol:
-        raise SolverError(f"start is not an equilibrium (max |R| = {np.max(np.abs(F[:-1])):.3e})")
+    if system.psi is not None and abs(F[-1]) > 1e-6:
+        raise SolverError(f"start is not an equilibrium (max |R| = {np.max(np.abs(F[:x0.size])):.3e}) nor a BP "
+                          f"of the unfolding (its null vector couples to the load: h = {F[-1]:.2e})")
     points, special = [first], []
     status = f"max_steps ({max_steps}) reached"
     for _ in range(max_steps):
@@ -250,6 +336,29 @@ def singular_curve(scene_at: Callable[[float], Scene], v0: float, x0: np.ndarray
             break
         ds = min(ds_max, ds * (1.5 if p.iterations <= 3 else 0.7))
     return _assemble(system, points, special, status)
+
+
+def _start_system(scene_at, control, v0, v_scale, x0, lam0) -> _System:
+    """The curve's system: that of exact singular points where the start is an equilibrium, else
+    that of the unfolded BP whose imperfection is the start's residual (psi = -R / |R|, the
+    state of a BP reported by snapmem.continuation.unfold carries R = -sigma psi); a residual
+    beyond unfold.IMPERFECTION_LIMIT of the load's force is no such BP, and an error."""
+    pb = make_problem(scene_at(v0), control)
+    R = pb.evaluate(x0, lam0, order=1)[0]
+    size = float(np.linalg.norm(R))
+    tol = 1e-10 * pb.scene.force_scale
+    if np.max(np.abs(R)) <= 1e3 * tol:
+        return _System(scene_at, control, v0, v_scale)
+    load = float(np.linalg.norm(lam0 * pb.dF_dlam(x0, lam0)))
+    if size > IMPERFECTION_LIMIT * load:
+        raise SolverError(f"start is not an equilibrium (max |R| = {np.max(np.abs(R)):.3e}) nor an unfolded BP "
+                          f"(|R| / |lam dR/dlam| = {size / load:.2e} > {IMPERFECTION_LIMIT:g})")
+    return _System(scene_at, control, v0, v_scale, psi=-R / size, x0=x0, lam0=lam0)
+
+
+def _sigma_at(system: _System, v, x, lam) -> float:
+    """sigma of R(x, lam; v) + sigma psi = 0 (least squares; exact at the curve's start)."""
+    return -float(system.psi @ system.problem(v).evaluate(x, lam, order=1)[0])
 
 
 def _specials(system: _System, base: SingularPoint, p: SingularPoint, cusps: bool) -> list:
@@ -296,8 +405,10 @@ def _assemble(system, points, special, status) -> SingularCurve:
     special = _distinct(special)
     def row(q):
         pb = system.problem(q.v)
+        unfolded = {} if q.sigma is None else {   # as the points table's: |sigma| / |lam dR/dlam|
+            "sigma": q.sigma, "imperfection": abs(q.sigma) / np.linalg.norm(q.lam * pb.dF_dlam(q.x, q.lam))}
         return {"v": q.v, "lam": q.lam, "a": q.a, "s": q.s, "kind": q.kind, "iterations": q.iterations,
-                **pb.measures(q.x, q.lam)}
+                **unfolded, **pb.measures(q.x, q.lam)}
 
     table = pd.DataFrame([row(q) for q in sorted(points + special, key=lambda q: q.s)])
     special_table = pd.DataFrame([row(q) for q in special],
