@@ -91,6 +91,7 @@ def snapmem_limit_pressures(scene_name, nodes, start_loads, until, **params):
     return np.array(out)
 
 
+@pytest.mark.slow                     # ~10 s: run by .ci/run with -m slow
 def test_torus_limit_point_is_a_pressure_maximum_and_snapmem_converges_to_it():
     ode = TorusODE()
     lp = ode.limit_point()

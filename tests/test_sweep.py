@@ -60,6 +60,7 @@ def kill_after(out, rows):
     return rows_in(out)
 
 
+@pytest.mark.slow                     # ~10 s: run by .ci/run with -m slow
 def test_killed_twice_and_resumed_gives_the_rows_of_an_uninterrupted_run(tmp_path, uninterrupted):
     out = tmp_path / "rows.csv"
     first = kill_after(out, 30)
@@ -109,6 +110,7 @@ def test_a_finished_sweep_reruns_nothing(tmp_path, uninterrupted):
     assert time.monotonic() - t0 < 5
 
 
+@pytest.mark.slow                     # ~10 s: run by .ci/run with -m slow
 def test_dask_local_cluster_gives_the_rows_of_the_local_pool(tmp_path, uninterrupted):
     pytest.importorskip("distributed", reason="dask[distributed] is not installed (pip install -e '.[dask]')")
     out = tmp_path / "dask.csv"
