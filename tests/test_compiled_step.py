@@ -174,7 +174,7 @@ def test_domain_is_the_scenes_at_gents_lock():
     for factor, inside in ((11.5, True), (11.9, False)):
         q = q0 * factor
         assert (s.inadmissible(q) is None) == inside
-        assert admissible(q, step.plan) == inside
+        assert admissible(q, step.plan, *step.terms) == inside
 
 
 def test_a_step_handed_back_runs_on_the_general_path(monkeypatch):

@@ -29,9 +29,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from snapmem.dynamics.compiled_assembly import Plan, assemble, contact_gaps
+from snapmem.dynamics.compiled_assembly import TANGENT, Plan, assemble, contact_gaps
 from snapmem.dynamics.compiled_measures import frames_measures
 from snapmem.dynamics.compiled_newton import HANDED_BACK, OUTCOMES, CONVERGED, time_step
+from snapmem.kernels.laws import LAW_LINEAR
 from snapmem.kernels.switch import compiled
 from snapmem.model.contact import contact_names
 from snapmem.model.terms import (BallDeclaration, ElectricDeclaration, LawDeclaration, LinearContactDeclaration,
@@ -52,6 +53,11 @@ class CompiledStep:
 
     def __init__(self, scene, plan: Plan, electric: tuple, pressure: bool, contact_slots: list):
         self.scene, self.plan = scene, plan
+        # (general_law, linear, balls): the plan where the scene has that kind of term, None where
+        # not, so that the kernels compile only the terms the scene has (compiled_assembly)
+        # (balls is None also says there are no bodies: time_step solves the band alone then)
+        self.terms = (None if plan.law_kind == LAW_LINEAR else plan, plan if plan.lin_axis.size else None,
+                      plan if plan.ball_radius.size or plan.n_bodies else None)
         self._electric = electric            # (eps / (2 H^2)) of each electric term
         self._pressure = pressure
         # (output name, index in the kernel's contact arrays) of every contact, in the scene's order
@@ -89,7 +95,7 @@ class CompiledStep:
 
     def _loads(self, loads) -> tuple:
         pressure = float(loads["pressure"]) if self._pressure else 0.0
-        a_el = sum(c * float(loads["voltage"]) ** 2 for c in self._electric)
+        a_el = float(sum(c * float(loads["voltage"]) ** 2 for c in self._electric))   # float64 for numba, always
         return pressure, a_el
 
     def assemble(self, q, loads, inertia=None, anchor=None, momentum=None):
@@ -100,7 +106,7 @@ class CompiledStep:
         inertia = np.zeros(n_free) if inertia is None else inertia
         anchor = q if anchor is None else anchor
         momentum = np.zeros(n_free) if momentum is None else momentum
-        return assemble(q, self.plan, *self._loads(loads), inertia, anchor, momentum, 2)
+        return assemble(q, self.plan, *self.terms, *self._loads(loads), inertia, anchor, momentum, TANGENT)
 
     def measures_many(self, Q, loads: list) -> tuple:
         """Potential energy [J], volume [m^3] and smallest contact gap [m] of every state (rows of Q,
@@ -108,7 +114,7 @@ class CompiledStep:
         ``<name>_gap`` [m]: what ``Scene.energy``, ``Scene.volume``, :meth:`min_gap` and
         :func:`snapmem.model.contact.contact_report` give, in one compiled call."""
         coefficients = np.array([self._loads(each) for each in loads], dtype=float).reshape(-1, 2)   # (pressure, a_el)
-        energy, volume, forces, gaps = frames_measures(np.ascontiguousarray(Q, dtype=float), self.plan,
+        energy, volume, forces, gaps = frames_measures(np.ascontiguousarray(Q, dtype=float), self.plan, *self.terms,
                                                        coefficients[:, 0].copy(), coefficients[:, 1].copy())
         columns = {}
         for name, i in self._contacts:
@@ -119,7 +125,7 @@ class CompiledStep:
 
     def min_gap(self, q) -> float:
         """Smallest gap of all contacts at q [m] (inf without contact)."""
-        gaps = contact_gaps(q, self.plan)
+        gaps = contact_gaps(q, self.plan, *self.terms[1:])
         return float(gaps.min()) if gaps.size else np.inf
 
     def solve(self, anchor, velocity, h, loads, fallback, mass, damping, tol, size, options):
@@ -130,7 +136,7 @@ class CompiledStep:
         back to the general path."""
         pressure, a_el = self._loads(loads)
         y, code, iterations, cuts, norm = time_step(
-            anchor, velocity, h, mass, damping, fallback, self.plan, pressure, a_el, tol, size,
+            anchor, velocity, h, mass, damping, fallback, self.plan, *self.terms, pressure, a_el, tol, size,
             options.max_iterations, options.max_cuts)
         if code == HANDED_BACK:
             return None
