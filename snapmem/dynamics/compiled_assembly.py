@@ -5,11 +5,12 @@ scene declared (:class:`Plan`, built by :meth:`snapmem.dynamics.compiled_step.Co
 Every formula here is a kernel of snapmem.kernels (the fused membrane assembly, the laws'
 densities, the contact barriers), the same ones ``Scene.evaluate`` uses.
 
-Compiled for the terms a scene has: besides the plan ``P``, each kernel takes ``general_law``,
-``linear`` and ``balls``, each either ``P`` (the scene has a law other than LAW_LINEAR, linear
-contacts, balls) or None. numba prunes the branches of an argument that is None before typing,
-so the code of absent terms is never compiled (a scene without contact compiles no barrier),
-and each combination is its own specialisation (kept in numba's cache like any other).
+Compiled for the terms a scene has: besides the plan ``P``, each kernel takes ``general_law``
+(a :data:`GeneralLaw`, or None for LAW_LINEAR), ``linear`` (:data:`LinearContacts` or None) and
+``balls`` (:data:`Balls` or None). numba prunes the branches of an argument that is None before
+typing, so the code of absent terms is never compiled (a scene without contact compiles no
+barrier), and each combination is its own specialisation (kept in numba's cache like any other).
+Small tuples, not one plan of every array: numba passes a tuple's arrays as separate arguments.
 
 The assembly's ``order`` is passed as :data:`GRADIENT` or :data:`TANGENT`, numpy integers: a
 Python int constant would make numba compile a kernel once per value (literal argument types),
@@ -33,14 +34,21 @@ from snapmem.model.contact import FRACTION_TO_BOUNDARY
 #: The assembly's order: energy and residual (GRADIENT), and the tangent (TANGENT).
 GRADIENT, TANGENT = np.int64(1), np.int64(2)
 
-# Everything the kernels need of a scene, packed once (numba takes named tuples of arrays).
+# Everything the kernels need of a scene, packed once (numba takes named tuples of arrays): the
+# membrane, its law and the scatter maps (Plan), and each kind of term the scene may not have.
 Plan = namedtuple("Plan", [
     "edges", "inv_length", "inv_mid_radius", "weight", "law_kind", "law_params",   # membrane; law: LAW_*
     "hess_index", "band_size", "n_band", "bandwidth", "free", "radius_dofs", "n_node_dofs", "n_bodies",
     "edge_dofs", "edge_pos", "node_hess",                                 # scatter maps of node and edge terms
-    "lin_nodes", "lin_ptr", "lin_axis", "lin_sign", "lin_offset", "lin_dhat", "lin_coef",   # rod, shell, plane
-    "ball_radius", "ball_dhat", "ball_coef", "ball_z0", "ball_dof", "ball_col", "ball_weight",  # balls
 ])
+#: A law other than LAW_LINEAR (Gent): its kind and parameters, as in the Plan.
+GeneralLaw = namedtuple("GeneralLaw", ["law_kind", "law_params"])
+#: The linear-gap contacts (rod, shell, plane): contact c holds nodes lin_nodes[lin_ptr[c]:lin_ptr[c + 1]].
+LinearContacts = namedtuple("LinearContacts", ["lin_nodes", "lin_ptr", "lin_axis", "lin_sign", "lin_offset",
+                                               "lin_dhat", "lin_coef"])
+#: The balls (edge contact), with the degree of freedom and border column of a ball's body (-1: fixed).
+Balls = namedtuple("Balls", ["ball_radius", "ball_dhat", "ball_coef", "ball_z0", "ball_dof", "ball_col",
+                             "ball_weight"])
 
 
 @njit(cache=True, nogil=True)
@@ -50,7 +58,7 @@ def assemble(q, P, general_law, linear, balls, pressure, a_el, inertia, anchor, 
     band, border and corner only at ``order`` 2 (zeros below). Energy inf if a contact gap is not positive.
 
     The same terms as ``Scene.evaluate`` (which documents them) for the declared terms, by the
-    same kernels and formulas; ``general_law``, ``linear``, ``balls``: P or None (module docstring).
+    same kernels and formulas; ``general_law``, ``linear``, ``balls``: the terms or None (module docstring).
     """
     lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
     if general_law is None:               # LAW_LINEAR: law_density's first branch

@@ -17,7 +17,7 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
     """What a recorded frame needs, for every row q of Q (with its pressure and electric
     coefficient): potential energy [J], volume [m^3], and the total normal force [N] and smallest
     gap [m] of every contact, linear ones first, then balls: energies (T,), volumes (T,), forces
-    (T, C), gaps (T, C). ``general_law``, ``linear``, ``balls``: the plan or None (see
+    (T, C), gaps (T, C). ``general_law``, ``linear``, ``balls``: those terms or None (see
     :mod:`snapmem.dynamics.compiled_assembly`)."""
     T = Q.shape[0]
     n_lin = 0 if linear is None else linear.lin_axis.size

@@ -41,7 +41,7 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
     free degrees of freedom; ``mass``, ``damping`` there), the tolerance kept above the inertia
     term's rounding floor (:func:`snapmem.solvers.rules.inertia_tolerance`), then damped Newton on
     the step's incremental potential: snapmem.solvers.newton.newton with merit='energy' (which
-    documents every rule here). ``general_law``, ``linear``, ``balls``: the plan or None (see
+    documents every rule here). ``general_law``, ``linear``, ``balls``: those terms or None (see
     :mod:`snapmem.dynamics.compiled_assembly`). Returns (y, code, iterations, cuts, norm), code one
     of this module's (an index into OUTCOMES, or HANDED_BACK).
 
