@@ -24,8 +24,8 @@ from collections import namedtuple
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.kernels.assembly import (edge_assembly, edge_stretches, linear_law_density, radius_max_step, residual_floor,
-                                     state_check)
+from snapmem.kernels.assembly import (edge_assembly, edge_stretches, linear_law_density, radius_max_step,
+                                     residual_floor, state_check)
 from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,
                                     linear_barrier, linear_max_step, linear_min_gap)
 from snapmem.kernels.laws import electric_density, law_admissible, law_density
