@@ -9,6 +9,10 @@ says what it compiled and how long each kernel took::
     snapmem warmup --all    # also every robot experiment's first steps (contacts, bodies)
 
 A kernel already in the cache is loaded, not compiled, and shows a load time of milliseconds.
+
+The compiled time step is compiled for the kinds of terms a scene has (a law other than the
+linear-in-invariants ones, linear contacts, balls; see :mod:`snapmem.dynamics.compiled_assembly`):
+``snapmem warmup`` compiles the one of torus_snap (no contact), ``--all`` those of every robot.
 """
 
 from __future__ import annotations

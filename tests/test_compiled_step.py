@@ -100,6 +100,42 @@ def test_bordered_solve_against_dense(k):
     assert np.max(np.abs(x - np.linalg.solve(M, rhs))) <= 1e-12 * np.max(np.abs(x))
 
 
+def test_band_solve_is_the_bordered_solve_without_bodies():
+    """A scene without bodies solves its band alone (compiled_newton.time_step): the same numbers,
+    to the last bit, as the bordered solve with k = 0, and the same refusals."""
+    from snapmem.kernels.bordered import band_solve
+    rng = np.random.default_rng(3)
+    n, b = 30, 3
+    lower = np.asfortranarray(np.vstack([10.0 + rng.random(n)] + [rng.standard_normal(n) for _ in range(b)]))
+    rhs = rng.standard_normal(n)
+    x, ok = band_solve(lower, rhs)
+    y, ok_bordered = bordered_solve(lower, np.zeros((0, n)), np.zeros((0, 0)), rhs, REFINE_ON_CANCELLATION)
+    assert ok and ok_bordered and np.array_equal(x, y)
+    dense = BandedMatrix.from_lower(lower, b).to_dense()
+    assert np.max(np.abs(dense @ x - rhs)) <= 1e-12 * np.max(np.abs(rhs))
+    tiny = lower.copy()
+    tiny[0, 0], tiny[1, 0] = 1e-12, 1.0                   # growth: both refuse
+    assert not band_solve(tiny, rhs)[1]
+    assert not bordered_solve(tiny, np.zeros((0, n)), np.zeros((0, 0)), rhs, REFINE_ON_CANCELLATION)[1]
+
+
+@pytest.mark.parametrize("name, linear, balls, general", [
+    ("torus_snap", False, False, False), ("gripper_rod", True, False, False), ("ball_drop", True, True, False),
+    ("pump", False, False, True)])
+def test_the_step_compiles_only_the_terms_its_scene_has(name, linear, balls, general):
+    """(general_law, linear, balls) are None for the kinds a scene has not (numba prunes their code),
+    and hold what the scene declared otherwise."""
+    step = CompiledStep.of(experiment(name).scene)
+    law, lin, ball = step.terms
+    assert (law is not None, lin is not None, ball is not None) == (general, linear, balls)
+    if lin is not None:
+        assert lin.lin_axis.size >= 1 and lin.lin_ptr[-1] == lin.lin_nodes.size
+    if ball is not None:
+        assert ball.ball_radius.size >= 1 and ball.ball_coef.shape == (ball.ball_radius.size, step.plan.edges.shape[0])
+    if law is not None:
+        assert law.law_kind == step.plan.law_kind and np.array_equal(law.law_params, step.plan.law_params)
+
+
 def test_bordered_solve_hands_back_what_ldlt_cannot_take():
     n, b = 6, 1
     lower = np.zeros((b + 1, n))
@@ -174,7 +210,7 @@ def test_domain_is_the_scenes_at_gents_lock():
     for factor, inside in ((11.5, True), (11.9, False)):
         q = q0 * factor
         assert (s.inadmissible(q) is None) == inside
-        assert admissible(q, step.plan) == inside
+        assert admissible(q, step.plan, *step.terms) == inside
 
 
 def test_a_step_handed_back_runs_on_the_general_path(monkeypatch):

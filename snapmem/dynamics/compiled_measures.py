@@ -7,46 +7,47 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import assemble, contact_gaps
+from snapmem.dynamics.compiled_assembly import GRADIENT, assemble, contact_gaps
 from snapmem.kernels.assembly import swept_volume
 from snapmem.kernels.contact import ball_edge_gaps, barrier_force
 
 
 @njit(cache=True, nogil=True)
-def frame_measures(q, P, pressure, a_el):
-    """What a recorded frame needs at q: (potential energy [J], volume [m^3], total normal force [N]
-    and smallest gap [m] of every contact, linear ones first, then balls)."""
-    n_free = P.free.size
-    zeros = np.zeros(n_free)
-    energy = assemble(q, P, pressure, a_el, zeros, q, zeros, 1)[0]
-    volume = 0.0
-    for e in range(P.edges.shape[0]):
-        a, b = P.edges[e, 0], P.edges[e, 1]
-        volume += swept_volume(q[2 * a], q[2 * b], q[2 * b + 1] - q[2 * a + 1], 1.0)[0]
-    x = q[: P.n_node_dofs].reshape(-1, 2)
-    n_lin = P.lin_axis.size
-    forces = np.zeros(n_lin + P.ball_radius.size)
-    for c in range(n_lin):
-        for k in range(P.lin_ptr[c], P.lin_ptr[c + 1]):
-            i = P.lin_nodes[k]
-            forces[c] += barrier_force(P.lin_sign[c] * x[i, P.lin_axis[c]] + P.lin_offset[c], P.lin_dhat[c],
-                                       P.lin_coef[c, i])
-    for c in range(P.ball_radius.size):
-        zc = q[P.ball_dof[c]] if P.ball_dof[c] >= 0 else P.ball_z0[c]
-        d = ball_edge_gaps(x, P.edges, zc, P.ball_radius[c])
-        for e in range(d.size):
-            forces[n_lin + c] += barrier_force(d[e], P.ball_dhat[c], P.ball_coef[c, e])
-    return energy, volume, forces, contact_gaps(q, P)
-
-
-@njit(cache=True, nogil=True)
-def frames_measures(Q, P, pressure, a_el):
-    """:func:`frame_measures` of every row of Q (with its pressure and electric coefficient):
-    energies (T,), volumes (T,), forces (T, C), gaps (T, C)."""
+def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
+    """What a recorded frame needs, for every row q of Q (with its pressure and electric
+    coefficient): potential energy [J], volume [m^3], and the total normal force [N] and smallest
+    gap [m] of every contact, linear ones first, then balls: energies (T,), volumes (T,), forces
+    (T, C), gaps (T, C). ``general_law``, ``linear``, ``balls``: those terms or None (see
+    :mod:`snapmem.dynamics.compiled_assembly`)."""
     T = Q.shape[0]
-    n_contacts = P.lin_axis.size + P.ball_radius.size
+    n_lin = 0 if linear is None else linear.lin_axis.size
+    n_contacts = n_lin + (0 if balls is None else balls.ball_radius.size)
     energy, volume = np.empty(T), np.empty(T)
-    forces, gaps = np.empty((T, n_contacts)), np.empty((T, n_contacts))
+    forces, gaps = np.zeros((T, n_contacts)), np.empty((T, n_contacts))
+    zeros = np.zeros(P.free.size)
     for t in range(T):
-        energy[t], volume[t], forces[t], gaps[t] = frame_measures(Q[t], P, pressure[t], a_el[t])
+        q = Q[t]
+        energy[t] = assemble(q, P, general_law, linear, balls, pressure[t], a_el[t], zeros, q, zeros, GRADIENT)[0]
+        v = 0.0
+        for e in range(P.edges.shape[0]):
+            a, b = P.edges[e, 0], P.edges[e, 1]
+            v += swept_volume(q[2 * a], q[2 * b], q[2 * b + 1] - q[2 * a + 1], 1.0)[0]
+        volume[t] = v
+        x = q[: P.n_node_dofs].reshape(-1, 2)
+        if linear is not None:
+            for c in range(n_lin):
+                for k in range(linear.lin_ptr[c], linear.lin_ptr[c + 1]):
+                    i = linear.lin_nodes[k]
+                    forces[t, c] += barrier_force(linear.lin_sign[c] * x[i, linear.lin_axis[c]] + linear.lin_offset[c],
+                                                  linear.lin_dhat[c], linear.lin_coef[c, i])
+        if balls is not None:
+            for c in range(balls.ball_radius.size):
+                zc = q[balls.ball_dof[c]] if balls.ball_dof[c] >= 0 else balls.ball_z0[c]
+                d = ball_edge_gaps(x, P.edges, zc, balls.ball_radius[c])
+                for e in range(d.size):
+                    forces[t, n_lin + c] += barrier_force(d[e], balls.ball_dhat[c], balls.ball_coef[c, e])
+        if n_contacts:
+            smallest = contact_gaps(q, P, linear, balls)
+            for c in range(n_contacts):          # (a loop: row assignment compiles a shape check)
+                gaps[t, c] = smallest[c]
     return energy, volume, forces, gaps

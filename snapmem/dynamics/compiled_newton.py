@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import admissible, assemble, max_step, state_ok
-from snapmem.kernels.bordered import bordered_solve
+from snapmem.dynamics.compiled_assembly import TANGENT, admissible, assemble, max_step, state_ok
+from snapmem.kernels.bordered import band_solve, bordered_solve
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
 from snapmem.solvers.rules import (CUT, converged, converged_at_end, energy_step_accepted, inertia_tolerance, max_norm,
                                    step_length)
@@ -35,35 +35,42 @@ OUTCOMES = (
 
 
 @njit(cache=True, nogil=True)
-def time_step(anchor, velocity, h, mass, damping, fallback, P, pressure, a_el, tol, size, max_iterations, max_cuts):
-    """The step's inertia M / h^2 + C / h, momentum M v / h and guess anchor + h v (on the free
-    degrees of freedom; ``mass``, ``damping`` there), the tolerance kept above the inertia term's
-    rounding floor (:func:`snapmem.solvers.rules.inertia_tolerance`), then :func:`step_newton`."""
+def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, linear, balls, pressure, a_el, tol, size,
+              max_iterations, max_cuts):
+    """One time step: its inertia M / h^2 + C / h, momentum M v / h and guess anchor + h v (on the
+    free degrees of freedom; ``mass``, ``damping`` there), the tolerance kept above the inertia
+    term's rounding floor (:func:`snapmem.solvers.rules.inertia_tolerance`), then damped Newton on
+    the step's incremental potential: snapmem.solvers.newton.newton with merit='energy' (which
+    documents every rule here). ``general_law``, ``linear``, ``balls``: those terms or None (see
+    :mod:`snapmem.dynamics.compiled_assembly`). Returns (y, code, iterations, cuts, norm), code one
+    of this module's (an index into OUTCOMES, or HANDED_BACK).
+
+    One kernel, not a set-up calling a Newton kernel: numba optimises a kernel together with all
+    it calls, so every level of calls is another pass over the whole solve at compile time.
+    """
     free = P.free
     n = free.size
     inertia, momentum = np.empty(n), np.empty(n)
     for i in range(n):
         inertia[i] = mass[i] / (h * h) + damping[i] / h
         momentum[i] = mass[i] * velocity[free[i]] / h
-    tol = inertia_tolerance(tol, np.max(inertia), size)
-    return step_newton(anchor + h * velocity, fallback, anchor, P, pressure, a_el, inertia, momentum, tol,
-                       max_iterations, max_cuts)
-
-
-@njit(cache=True, nogil=True)
-def step_newton(guess, fallback, anchor, P, pressure, a_el, inertia, momentum, tol, max_iterations, max_cuts):
-    """Damped Newton on the step's incremental potential: snapmem.solvers.newton.newton with
-    merit='energy' (which documents every rule here). Returns (y, code, iterations, cuts, norm),
-    code one of this module's (an index into OUTCOMES, or HANDED_BACK)."""
-    if admissible(guess, P):
+    largest = -np.inf                          # np.max(inertia) (a loop: numba's np.max compiles a lot)
+    for i in range(n):
+        if np.isnan(inertia[i]):
+            largest = inertia[i]
+            break
+        largest = max(largest, inertia[i])
+    tol = inertia_tolerance(tol, largest, size)
+    guess = anchor + h * velocity
+    if admissible(guess, P, general_law, linear, balls):
         q = guess.copy()
     else:
         q = fallback.copy()
-        if not admissible(q, P):
+        if not admissible(q, P, general_law, linear, balls):
             return q, START_OUTSIDE, 0, 0, np.nan
-    energy, residual, lower, border, corner, floor = assemble(q, P, pressure, a_el, inertia, anchor, momentum, 2)
+    energy, residual, lower, border, corner, floor = assemble(q, P, general_law, linear, balls, pressure, a_el,
+                                                              inertia, anchor, momentum, TANGENT)
     norm = max_norm(residual)
-    free = P.free
     last_step = np.inf
     iterations = cuts = 0
     code = MAX_ITERATIONS
@@ -75,12 +82,15 @@ def step_newton(guess, fallback, anchor, P, pressure, a_el, inertia, momentum, t
         if not np.isfinite(norm):
             code = NOT_FINITE
             break
-        dx, ok = bordered_solve(lower, border, corner, -residual, REFINE_ON_CANCELLATION)
+        if balls is None:                           # no bodies (CompiledStep.terms): the band alone
+            dx, ok = band_solve(lower, -residual)
+        else:
+            dx, ok = bordered_solve(lower, border, corner, -residual, REFINE_ON_CANCELLATION)
         if not ok:
             return q, HANDED_BACK, iterations, cuts, norm
         for i in range(free.size):
             dq[free[i]] = dx[i]
-        alpha = min(1.0, max_step(q, dq, P))
+        alpha = min(1.0, max_step(q, dq, P, linear, balls))
         slope = residual @ dx
         iterations += 1
         accepted = inside = False
@@ -88,9 +98,10 @@ def step_newton(guess, fallback, anchor, P, pressure, a_el, inertia, momentum, t
         e_t, r_t, lo_t, bo_t, co_t, fl_t, n_t = energy, residual, lower, border, corner, floor, norm
         for _cut in range(max_cuts + 1):
             trial = q + alpha * dq
-            inside = state_ok(trial, P)          # the contacts' gaps: the barriers' energy is inf at a gap <= 0
+            inside = state_ok(trial, P, general_law)   # the contacts' gaps: the barriers' energy is inf at a gap <= 0
             if inside:
-                e_t, r_t, lo_t, bo_t, co_t, fl_t = assemble(trial, P, pressure, a_el, inertia, anchor, momentum, 2)
+                e_t, r_t, lo_t, bo_t, co_t, fl_t = assemble(trial, P, general_law, linear, balls, pressure, a_el,
+                                                            inertia, anchor, momentum, TANGENT)
                 inside = e_t < np.inf
                 n_t = max_norm(r_t)
                 if energy_step_accepted(e_t, n_t, energy, norm, alpha, slope):

@@ -29,9 +29,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from snapmem.dynamics.compiled_assembly import Plan, assemble, contact_gaps
+from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, assemble,
+                                                contact_gaps)
 from snapmem.dynamics.compiled_measures import frames_measures
 from snapmem.dynamics.compiled_newton import HANDED_BACK, OUTCOMES, CONVERGED, time_step
+from snapmem.kernels.laws import LAW_LINEAR
 from snapmem.kernels.switch import compiled
 from snapmem.model.contact import contact_names
 from snapmem.model.terms import (BallDeclaration, ElectricDeclaration, LawDeclaration, LinearContactDeclaration,
@@ -50,8 +52,11 @@ class CompiledStep:
     :meth:`solve` takes the place of ``newton(assemble, guess, ...)`` in the stepper.
     """
 
-    def __init__(self, scene, plan: Plan, electric: tuple, pressure: bool, contact_slots: list):
+    def __init__(self, scene, plan: Plan, terms: tuple, electric: tuple, pressure: bool, contact_slots: list):
         self.scene, self.plan = scene, plan
+        # (general_law, linear, balls): those terms, None for a kind the scene has not, so that the
+        # kernels compile only the terms the scene has (compiled_assembly)
+        self.terms = terms
         self._electric = electric            # (eps / (2 H^2)) of each electric term
         self._pressure = pressure
         # (output name, index in the kernel's contact arrays) of every contact, in the scene's order
@@ -83,13 +88,13 @@ class CompiledStep:
                 balls.append(declared)
             else:
                 return None
-        plan = _plan(scene, law[0], linear, balls)
+        plan, terms = _plan(scene, law[0], linear, balls)
         slots = [len(linear) + i if ball else i for ball, i in slots]      # every node term is a contact here
-        return cls(scene, plan, tuple(d.coefficient for d in electric), bool(pressure), slots)
+        return cls(scene, plan, terms, tuple(d.coefficient for d in electric), bool(pressure), slots)
 
     def _loads(self, loads) -> tuple:
         pressure = float(loads["pressure"]) if self._pressure else 0.0
-        a_el = sum(c * float(loads["voltage"]) ** 2 for c in self._electric)
+        a_el = float(sum(c * float(loads["voltage"]) ** 2 for c in self._electric))   # float64 for numba, always
         return pressure, a_el
 
     def assemble(self, q, loads, inertia=None, anchor=None, momentum=None):
@@ -100,7 +105,7 @@ class CompiledStep:
         inertia = np.zeros(n_free) if inertia is None else inertia
         anchor = q if anchor is None else anchor
         momentum = np.zeros(n_free) if momentum is None else momentum
-        return assemble(q, self.plan, *self._loads(loads), inertia, anchor, momentum, 2)
+        return assemble(q, self.plan, *self.terms, *self._loads(loads), inertia, anchor, momentum, TANGENT)
 
     def measures_many(self, Q, loads: list) -> tuple:
         """Potential energy [J], volume [m^3] and smallest contact gap [m] of every state (rows of Q,
@@ -108,7 +113,7 @@ class CompiledStep:
         ``<name>_gap`` [m]: what ``Scene.energy``, ``Scene.volume``, :meth:`min_gap` and
         :func:`snapmem.model.contact.contact_report` give, in one compiled call."""
         coefficients = np.array([self._loads(each) for each in loads], dtype=float).reshape(-1, 2)   # (pressure, a_el)
-        energy, volume, forces, gaps = frames_measures(np.ascontiguousarray(Q, dtype=float), self.plan,
+        energy, volume, forces, gaps = frames_measures(np.ascontiguousarray(Q, dtype=float), self.plan, *self.terms,
                                                        coefficients[:, 0].copy(), coefficients[:, 1].copy())
         columns = {}
         for name, i in self._contacts:
@@ -119,7 +124,7 @@ class CompiledStep:
 
     def min_gap(self, q) -> float:
         """Smallest gap of all contacts at q [m] (inf without contact)."""
-        gaps = contact_gaps(q, self.plan)
+        gaps = contact_gaps(q, self.plan, *self.terms[1:])
         return float(gaps.min()) if gaps.size else np.inf
 
     def solve(self, anchor, velocity, h, loads, fallback, mass, damping, tol, size, options):
@@ -130,7 +135,7 @@ class CompiledStep:
         back to the general path."""
         pressure, a_el = self._loads(loads)
         y, code, iterations, cuts, norm = time_step(
-            anchor, velocity, h, mass, damping, fallback, self.plan, pressure, a_el, tol, size,
+            anchor, velocity, h, mass, damping, fallback, self.plan, *self.terms, pressure, a_el, tol, size,
             options.max_iterations, options.max_cuts)
         if code == HANDED_BACK:
             return None
@@ -138,29 +143,34 @@ class CompiledStep:
         return y, NewtonReport(code == CONVERGED, int(iterations), float(norm), reason, int(cuts), status=status)
 
 
-def _plan(scene, law: LawDeclaration, linear: list, balls: list) -> Plan:
-    """The kernels' arrays for ``scene`` with the declared law, linear contacts and balls."""
+def _plan(scene, law: LawDeclaration, linear: list, balls: list) -> tuple:
+    """The kernels' arrays for ``scene`` with the declared law, linear contacts and balls: the
+    :class:`Plan` and the kernels' (general_law, linear, balls), None for a kind the scene has not."""
     m, dofs = scene.meridian, scene.dofs
     n_nodes, n_edges = m.nodes, m.edges.shape[0]
-    return Plan(
+    plan = Plan(
         edges=_ints(m.edges), inv_length=m.inverse_length, inv_mid_radius=m.inverse_mid_radius, weight=scene.weight,
         law_kind=law.kind, law_params=np.array(law.params, dtype=float),
         hess_index=_ints(dofs.hess_index), band_size=int(dofs.band_size), n_band=int(dofs.n_band),
         bandwidth=int(dofs.bandwidth), free=_ints(dofs.free), radius_dofs=_ints(dofs.radius_dofs),
         n_node_dofs=int(dofs.n_node_dofs), n_bodies=int(dofs.n_bodies),
-        edge_dofs=_ints(dofs.edge_dofs), edge_pos=_ints(dofs.edge_pos), node_hess=_ints(dofs.node_hess),
-        lin_nodes=np.concatenate([_ints(c.nodes) for c in linear] or [np.zeros(0, np.int64)]),
+        edge_dofs=_ints(dofs.edge_dofs), edge_pos=_ints(dofs.edge_pos), node_hess=_ints(dofs.node_hess))
+    general_law = None if law.kind == LAW_LINEAR else GeneralLaw(plan.law_kind, plan.law_params)
+    linear_contacts = None if not linear else LinearContacts(
+        lin_nodes=np.concatenate([_ints(c.nodes) for c in linear]),
         lin_ptr=np.cumsum([0] + [c.nodes.size for c in linear]).astype(np.int64),
         lin_axis=np.array([c.axis for c in linear], dtype=np.int64),
         lin_sign=np.array([c.sign for c in linear], dtype=float),
         lin_offset=np.array([c.offset for c in linear], dtype=float),
         lin_dhat=np.array([c.dhat for c in linear], dtype=float),
-        lin_coef=np.array([c.coef for c in linear], dtype=float).reshape(len(linear), n_nodes),
+        lin_coef=np.array([c.coef for c in linear], dtype=float).reshape(len(linear), n_nodes))
+    # balls is None also says there are no bodies (time_step then solves the band alone)
+    ball_contacts = None if not balls and not plan.n_bodies else Balls(
         ball_radius=np.array([b.radius for b in balls], dtype=float),
         ball_dhat=np.array([b.dhat for b in balls], dtype=float),
         ball_coef=np.array([b.coef for b in balls], dtype=float).reshape(len(balls), n_edges),
         ball_z0=np.array([b.z0 for b in balls], dtype=float),
         ball_dof=np.array([b.dof for b in balls], dtype=np.int64),
         ball_col=np.array([b.dof - dofs.n_node_dofs if b.dof >= 0 else -1 for b in balls], dtype=np.int64),
-        ball_weight=np.array([b.weight for b in balls], dtype=float),
-    )
+        ball_weight=np.array([b.weight for b in balls], dtype=float))
+    return plan, (general_law, linear_contacts, ball_contacts)

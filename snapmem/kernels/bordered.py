@@ -129,6 +129,19 @@ def _eliminate(F, border, Z, S, rhs):
 
 
 @njit(cache=True, nogil=True)
+def band_solve(lower, rhs):
+    """Solve A x = rhs for the band ``lower`` alone by its LDL^T: (x, ok), ok False for a tangent the
+    LDL^T cannot take (as :func:`bordered_solve`, which this is without bodies; its own kernel, so
+    that a scene without bodies compiles none of the bodies' elimination)."""
+    F, negative, zero, growth = band_ldlt(lower, lower.shape[0] - 1)
+    if zero > 0 or growth > LDLT_GROWTH_LIMIT:
+        return rhs, False
+    x = rhs.copy()
+    _ldlt_solve_vector(F, x)
+    return x, True
+
+
+@njit(cache=True, nogil=True)
 def bordered_solve(lower, border, corner, rhs, refine):
     """Solve [[A, B], [B^T, C]] x = rhs (A the band ``lower``, B = border^T) with the refinement
     policy ``refine`` (a ``REFINE_*`` of snapmem.kernels.linalg): (x, ok), ok False for a tangent
@@ -141,6 +154,8 @@ def bordered_solve(lower, border, corner, rhs, refine):
     only where S shows that cancellation (REFINE_ON_CANCELLATION).
     """
     nb, k = lower.shape[1], border.shape[0]
+    if k == 0:
+        return band_solve(lower, rhs)
     F, negative, zero, growth = band_ldlt(lower, lower.shape[0] - 1)
     if zero > 0 or growth > LDLT_GROWTH_LIMIT:
         return rhs, False
@@ -151,9 +166,6 @@ def bordered_solve(lower, border, corner, rhs, refine):
         W[i, k] = rhs[i]
     band_ldlt_solve(F, W)                             # [Z | y] = A^-1 [B | rhs_band]
     x = np.empty(nb + k)
-    if k == 0:
-        x[:] = W[:, 0]
-        return x, True
     Z = np.ascontiguousarray(W[:, :k])
     S = corner.copy()
     terms = np.abs(corner)
@@ -177,7 +189,8 @@ def bordered_solve(lower, border, corner, rhs, refine):
         for a in range(k):
             t -= Z[i, a] * mu[a]
         x[i] = t
-    x[nb:] = mu
+    for a in range(k):                                # (a loop: a slice assignment compiles a shape check)
+        x[nb + a] = mu[a]
     if not needs_refinement(refine, S, terms):
         return x, True
     r = rhs.copy()                                    # one refinement step, r = rhs - M x

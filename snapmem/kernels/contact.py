@@ -15,6 +15,10 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
+# Offsets of an edge's ends in its (r_a, z_a, r_b, z_b) as numpy integers: numba would compile
+# :func:`_node_gap` once per Python int constant (a literal argument type).
+_FIRST_END, _SECOND_END = np.int64(0), np.int64(2)
+
 
 @njit(cache=True, nogil=True, inline="always")
 def ipc_barrier(d, dhat, c):
@@ -181,9 +185,9 @@ def ball_edge_barrier(x, edges, zc, radius, dhat, coef, body, order):
         g[:] = 0.0
         h[:, :] = 0.0
         if t <= 0.0:
-            d = _node_gap(ar, az - zc, radius, body, g, h, 0, order)
+            d = _node_gap(ar, az - zc, radius, body, g, h, _FIRST_END, order)
         elif t >= 1.0:
-            d = _node_gap(br, bz - zc, radius, body, g, h, 2, order)
+            d = _node_gap(br, bz - zc, radius, body, g, h, _SECOND_END, order)
         else:
             d = _segment_gap(ar, az, ur, uz, wr, wz, radius, body, g, h, order, gC, gL)
         if d <= 0.0:

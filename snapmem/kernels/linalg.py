@@ -147,7 +147,9 @@ def symmetric_eig(A: np.ndarray):
     to rounding (the subspace iteration's m x m Rayleigh-Ritz matrix; m = k + 4)."""
     m = A.shape[0]
     A = A.copy()
-    V = np.eye(m)
+    V = np.zeros((m, m))                            # the identity (a loop: numba's np.eye compiles slowly)
+    for p in range(m):
+        V[p, p] = 1.0
     for _ in range(60):
         off = 0.0
         total = 0.0
@@ -200,7 +202,9 @@ def ritz_step(V: np.ndarray, W: np.ndarray):
         for c in range(a):
             H[a, c] = H[c, a] = 0.5 * (H[a, c] + H[c, a])
     mu, Y = symmetric_eig(H)                        # Ritz values of K^-1 on span(V)
-    order = np.arange(m)                            # by |mu| descending: nearest zero in K first
+    order = np.empty(m, dtype=np.int64)             # by |mu| descending: nearest zero in K first
+    for a in range(m):
+        order[a] = a
     for a in range(1, m):
         c = a
         while c > 0 and abs(mu[order[c]]) > abs(mu[order[c - 1]]):
