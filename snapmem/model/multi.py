@@ -110,6 +110,12 @@ class MultiScene:
         return tuple(t for m in self.membranes for t in m.terms)
 
     @property
+    def probes(self) -> dict:
+        """Every membrane's probes, named with the membrane's number (``stretch_1``): name -> q -> value."""
+        return {f"{name}_{i + 1}": (lambda f, i: lambda q: f(self.split(q)[i]))(probe, i)
+                for i, m in enumerate(self.membranes) for name, probe in m.probes.items()}
+
+    @property
     def n_free(self) -> int:
         return int(self.free.size)
 
