@@ -100,7 +100,7 @@ class ChamberProblem(LoadProblem):
         self.p_scale = scene.mu * scene.thickness / L
         self.x_weight = np.concatenate([np.full(scene.n_free, 1.0 / (L * L * N)),
                                         np.full(len(self.multiplied), 1.0 / self.p_scale ** 2)])
-        q0 = scene.reference_state()
+        q0 = self._reference = scene.reference_state()
         v0 = abs(scene.chamber_volume(q0, self.controlled)) if self.controlled is not None else 0.0
         v0 = v0 if v0 > 0 else L ** 3
         self.lam_scale = {"volume": 10.0 * v0, "pressure": self.p_scale,
@@ -124,7 +124,7 @@ class ChamberProblem(LoadProblem):
     # ----------------------------------------------------------------------------------------
     def state(self, x, lam):
         sc = self.scene
-        q = sc.reference_state()
+        q = self._reference.copy()
         q[sc.free] = x[: sc.n_free]
         loads = dict(self.base)
         for j, c in enumerate(self.multiplied):

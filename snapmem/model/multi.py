@@ -91,6 +91,7 @@ class MultiScene:
         # membranes whose pressure work is the swept volume's alone (the chamber's fast path)
         self._swept = [compiled() and [type(t) for t in m.edge_terms + m.density_terms if "pressure" in t.loads]
                        == [PressureWork] for m in self.membranes]
+        self._edge_dofs = [(2 * m.meridian.edges[:, 0], 2 * m.meridian.edges[:, 1]) for m in self.membranes]
         self.loads = {}
         for c, chamber in enumerate(self.chambers):
             self.loads[self.pressure_name(c)] = float(chamber.pressure)
@@ -221,11 +222,10 @@ class MultiScene:
             m, qi = self.membranes[i], parts[i]
             block = slice(self.free_offsets[i], self.free_offsets[i + 1])
             if self._swept[i]:
-                edges = m.meridian.edges
-                a, b = 2 * edges[:, 0], 2 * edges[:, 1]
+                a, b = self._edge_dofs[i]
                 total += s * float(swept_volume.py_func(qi[a], qi[b], qi[b + 1] - qi[a + 1], 1.0)[0].sum())
                 if gradient:
-                    out[block] = s * volume_gradient(qi, edges, qi.size)[m.free]
+                    out[block] = s * volume_gradient(qi, m.meridian.edges, qi.size)[m.free]
             else:
                 total += s * m.volume(qi)
                 if gradient:
