@@ -114,3 +114,42 @@ def test_bad_control_is_one_clear_error():
     from snapmem.errors import SnapmemError
     with pytest.raises(SnapmemError, match="gas"):
         trace(build_scene("two_balloons", nodes=11), "gas_amount")
+
+
+def test_chamber_volume_fast_path_is_the_membranes_volume_and_load_derivative():
+    """The chamber's volume and gradient from the nodes and the compiled kernel equal each
+    membrane's Scene.volume and -dR/dp (the general path), on a deformed unequal pair."""
+    scene = build_scene("two_balloons", nodes=21, R2=12.0)
+    q = scene.reference_state()
+    q[0::2] *= 1.0 + 0.1 * np.sin(np.arange(q[0::2].size))
+    q[1::2] *= 0.9
+    fast = scene.chamber_volume_and_gradient(q, 0)
+    scene._swept = [False, False]
+    general = scene.chamber_volume_and_gradient(q, 0)
+    assert fast[0] == pytest.approx(general[0], rel=1e-13)
+    assert np.allclose(fast[1], general[1], rtol=0, atol=1e-12 * np.abs(general[1]).max())
+    parts = scene.split(q)
+    assert general[0] == pytest.approx(sum(m.volume(p) for m, p in zip(scene.membranes, parts)), rel=1e-13)
+
+
+def test_balloon_on_a_gas_reservoir_is_the_gas_chamber_scene(tmp_path):
+    """``balloon --set chamber=gas --set gas_volume=V`` is one balloon on a gas chamber of dead
+    volume V: its branch is the MultiScene's built by hand, it obeys the gas law, and the
+    default ``chamber = pressure`` balloon is the plain scene with its parameters unchanged."""
+    from snapmem.cli import main
+    plain = build_scene("balloon", nodes=21)
+    assert not isinstance(plain, MultiScene) and "chamber" not in plain.parameters
+    dead = 1e4 * float(balloon_volume(1.0))
+    scene = build_scene("balloon", nodes=51, chamber="gas", gas_volume=dead)
+    assert isinstance(scene, MultiScene) and scene.parameters["gas_volume"] == dead
+    t = trace(scene, "gas_amount", until={"stretch_max": 2.0}).table
+    by_hand = trace(_gas_balloon(dead), "gas_amount", until={"stretch_max": 2.0}).table
+    assert np.allclose(t["pressure"], by_hand["pressure"], rtol=1e-12, atol=0)
+    assert np.max(np.abs((t["pressure"] + 0.25) * t["volume"] / t["gas_amount"] - 1)) < 1e-10
+    out = tmp_path / "gas.csv"
+    assert main(["trace", "balloon", "--set", "chamber=gas", "--set", f"gas_volume={dead}", "--set", "nodes=31",
+                 "--control", "gas_amount", "--until", "stretch_max=2", "--out", str(out)]) == 0
+    assert out.exists()
+    from snapmem.errors import SnapmemError
+    with pytest.raises(SnapmemError, match="gas sets the pressure"):
+        build_scene("balloon", chamber="gas", pressure=0.01)

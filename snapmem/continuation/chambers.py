@@ -34,12 +34,39 @@ import numpy as np
 
 from snapmem.continuation.problems import PROBLEM_FACTORIES, LoadProblem
 from snapmem.errors import SnapmemError
-from snapmem.kernels.banded import BorderedMatrix, eigenvalues_near_zero
+from snapmem.kernels.banded import BandedMatrix, BorderedMatrix, eigenvalues_near_zero
+from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
 from snapmem.model.chambers import ChamberKind, gas_compliance, gas_volume
 from snapmem.model.multi import MultiScene
 
 #: Controls of a multi-membrane scene besides the membranes' voltages ``voltage_1``, ...
 CHAMBER_CONTROLS = ("volume", "gas_amount", "pressure")
+
+
+class ChamberJacobian(BorderedMatrix):
+    """J = [[K, -G], [-G^T, -D]] (module docstring): a :class:`BorderedMatrix` on a band K whose
+    product with several vectors at once (the eigenvalue iterations' subspace) is one band product
+    and two small dense ones, not one product per vector.
+
+    Its solves refine only where the Schur complement shows cancellation
+    (:data:`~snapmem.kernels.linalg.REFINE_ON_CANCELLATION`): every solve the tracer makes with it
+    (corrector, tangent) goes through the arclength bordering around J, which refines always with
+    the exact product J x, so a second refinement inside it only repeated that work (half of the
+    band solves of a step). The traced branches agree with always refining to 1e-13 relative.
+    """
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        if x.ndim == 1 or not isinstance(self.A, BandedMatrix):
+            return super().matvec(x)
+        n = self.A.n
+        y = np.empty((self.n, x.shape[1]))
+        y[:n] = self.A.matvec(x[:n])
+        y[:n] += self.B @ x[n:]
+        y[n:] = self.C.T @ x[:n] + self.D @ x[n:]
+        return y
+
+    def factor(self, inner=None, refine: int = REFINE_ON_CANCELLATION):
+        return super().factor(inner, refine)
 
 
 class ChamberProblem(LoadProblem):
@@ -73,7 +100,7 @@ class ChamberProblem(LoadProblem):
         self.p_scale = scene.mu * scene.thickness / L
         self.x_weight = np.concatenate([np.full(scene.n_free, 1.0 / (L * L * N)),
                                         np.full(len(self.multiplied), 1.0 / self.p_scale ** 2)])
-        q0 = scene.reference_state()
+        q0 = self._reference = scene.reference_state()
         v0 = abs(scene.chamber_volume(q0, self.controlled)) if self.controlled is not None else 0.0
         v0 = v0 if v0 > 0 else L ** 3
         self.lam_scale = {"volume": 10.0 * v0, "pressure": self.p_scale,
@@ -97,7 +124,7 @@ class ChamberProblem(LoadProblem):
     # ----------------------------------------------------------------------------------------
     def state(self, x, lam):
         sc = self.scene
-        q = sc.reference_state()
+        q = self._reference.copy()
         q[sc.free] = x[: sc.n_free]
         loads = dict(self.base)
         for j, c in enumerate(self.multiplied):
@@ -131,13 +158,13 @@ class ChamberProblem(LoadProblem):
         G = np.empty((sc.n_free, k))
         rows, D = np.empty(k), np.zeros((k, k))
         for j, c in enumerate(self.multiplied):
-            G[:, j] = sc.volume_gradient(q, c)
+            volume, G[:, j] = sc.chamber_volume_and_gradient(q, c)
             p = loads[sc.pressure_name(c)]
             v_star, dv_dp, _ = self.target(c, p, lam)
-            rows[j] = -(sc.chamber_volume(q, c) - v_star)
+            rows[j] = -(volume - v_star)
             D[j, j] = -dv_dp
         F = np.concatenate([ev.residual, rows])
-        J = None if order < 2 else BorderedMatrix(ev.stiffness, -G, -G, -D)
+        J = None if order < 2 else ChamberJacobian(ev.stiffness, -G, -G, -D)
         return (F, J, ev.residual_floor) if with_floor else (F, J)
 
     def dF_dlam(self, x, lam):

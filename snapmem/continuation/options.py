@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from snapmem.errors import SnapmemError, check_int, check_real
 
 #: The parameters a branch can be traced in.
-CONTROLS = ("pressure", "voltage", "E_hat", "volume")
+CONTROLS = ("pressure", "voltage", "E_hat", "volume", "gas_amount")   # gas_amount: a gas chamber's n R T [J]
 
 
 @dataclass(frozen=True)

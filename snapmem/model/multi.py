@@ -22,9 +22,12 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from snapmem.errors import SnapmemError, check_real
+from snapmem.kernels.assembly import swept_volume, volume_gradient
 from snapmem.kernels.banded import BandedMatrix
+from snapmem.kernels.switch import compiled
 from snapmem.model.chambers import Chamber
 from snapmem.model.scene import Evaluation, Scene
+from snapmem.model.terms import PressureWork
 
 
 class MeridianSet:
@@ -85,6 +88,10 @@ class MultiScene:
         self.free_offsets = np.concatenate([[0], np.cumsum([m.n_free for m in self.membranes])]).astype(int)
         self.bandwidth = max(m.bandwidth for m in self.membranes)
         self.meridian = MeridianSet([m.meridian for m in self.membranes])
+        # membranes whose pressure work is the swept volume's alone (the chamber's fast path)
+        self._swept = [compiled() and [type(t) for t in m.edge_terms + m.density_terms if "pressure" in t.loads]
+                       == [PressureWork] for m in self.membranes]
+        self._edge_dofs = [(2 * m.meridian.edges[:, 0], 2 * m.meridian.edges[:, 1]) for m in self.membranes]
         self.loads = {}
         for c, chamber in enumerate(self.chambers):
             self.loads[self.pressure_name(c)] = float(chamber.pressure)
@@ -102,6 +109,12 @@ class MultiScene:
     def terms(self) -> tuple:
         """Every membrane's energy terms, membrane by membrane."""
         return tuple(t for m in self.membranes for t in m.terms)
+
+    @property
+    def probes(self) -> dict:
+        """Every membrane's probes, named with the membrane's number (``stretch_1``): name -> q -> value."""
+        return {f"{name}_{i + 1}": (lambda f, i: lambda q: f(self.split(q)[i]))(probe, i)
+                for i, m in enumerate(self.membranes) for name, probe in m.probes.items()}
 
     @property
     def n_free(self) -> int:
@@ -188,14 +201,36 @@ class MultiScene:
 
     def chamber_volume(self, q: np.ndarray, c: int) -> float:
         """V_c = V_dead + sum_i s_i V_i [m^3] of chamber c."""
-        chamber = self.chambers[c]
-        parts = self.split(q)
-        return chamber.dead_volume + sum(s * self.membranes[i].volume(parts[i])
-                                         for i, s in zip(chamber.membranes, chamber.signs))
+        return self.chamber_volume_and_gradient(q, c, gradient=False)[0]
 
     def volume_gradient(self, q: np.ndarray, c: int) -> np.ndarray:
         """dV_c/dq on the free degrees of freedom, shape (n_free,) [m^2]."""
-        return -self.load_derivative(q, self.pressure_name(c), {self.pressure_name(c): 0.0})
+        return self.chamber_volume_and_gradient(q, c)[1]
+
+    def chamber_volume_and_gradient(self, q: np.ndarray, c: int, gradient: bool = True) -> tuple:
+        """(V_c [m^3], dV_c/dq on the free degrees of freedom (n_free,) [m^2], or None) of chamber c.
+
+        A membrane whose pressure work is the swept volume's (:class:`PressureWork`) takes the
+        swept volume straight from its nodes and the gradient from the compiled kernel, without
+        the kinematics a full evaluation builds; any other takes its volume and load derivative.
+        """
+        chamber = self.chambers[c]
+        parts = self.split(q)
+        total = chamber.dead_volume
+        out = np.zeros(self.n_free) if gradient else None
+        for i, s in zip(chamber.membranes, chamber.signs):
+            m, qi = self.membranes[i], parts[i]
+            block = slice(self.free_offsets[i], self.free_offsets[i + 1])
+            if self._swept[i]:
+                a, b = self._edge_dofs[i]
+                total += s * float(swept_volume.py_func(qi[a], qi[b], qi[b + 1] - qi[a + 1], 1.0)[0].sum())
+                if gradient:
+                    out[block] = s * volume_gradient(qi, m.meridian.edges, qi.size)[m.free]
+            else:
+                total += s * m.volume(qi)
+                if gradient:
+                    out[block] = -s * m.load_derivative(qi, "pressure", {"pressure": 0.0})
+        return total, out
 
     def volume(self, q: np.ndarray) -> float:
         """The first chamber's volume [m^3] (or the first membrane's, without chambers)."""
