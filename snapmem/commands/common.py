@@ -9,8 +9,8 @@ from snapmem.continuation import CONTROLS
 from snapmem.errors import FIGURE_SUFFIXES, SnapmemError, check_output, parse_number
 
 
-#: The controls that move a load (fold curves and hysteresis loops; not volume).
-LOAD_CONTROLS = tuple(control for control in CONTROLS if control != "volume")
+#: The controls that move a load (fold curves and hysteresis loops; not a volume or a gas amount).
+LOAD_CONTROLS = tuple(control for control in CONTROLS if control not in ("volume", "gas_amount"))
 
 
 def real(text: str) -> float:

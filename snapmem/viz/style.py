@@ -39,6 +39,7 @@ LABELS = {
     "u_max": (r"$u_m$", ""),
     "deflection": (r"$u_m$", ""),
     "volume": (r"$V$", ""),
+    "gas_amount": (r"$nRT$", ""),
     "t": (r"$t$", "s"),
     "dt": (r"$\Delta t$", "s"),
     "wall_time_s": ("wall time", "s"),
@@ -65,6 +66,7 @@ SI_LABELS = {
     "u_max": (r"$u_m$", "m"),
     "deflection": (r"$u_m$", "m"),
     "volume": (r"$V$", "m$^3$"),
+    "gas_amount": (r"$nRT$", "J"),
     "min_tension": (r"$\min(T_1, T_2)$", "N/m"),
 }
 
