@@ -102,7 +102,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     if why is not None:
         raise SolverError(f"initial state is outside the model's domain: {why}")
     stepper = _Stepper(scene, mass, c, options)
-    internal = _InternalState(scene)       # viscous networks' internal stretches (none: does nothing)
+    internal = _InternalState(scene, q)      # viscous networks' internal stretches (none: does nothing)
     free = scene.free
 
     last_loads = [None, None]

@@ -80,18 +80,19 @@ class _InternalState:
     They follow the step's scheme exactly as the positions do: the scheme's anchor of the state
     zeta (its x_hat, with the same h) opens the networks' incremental potential before the solve,
     and the scheme's ``new_state`` turns the solve's zeta*(y) into zeta_{n+1} (the midpoint rule:
-    2 zeta* - zeta_n). Without viscous terms every method does nothing.
+    2 zeta* - zeta_n). The networks start relaxed at the initial state q0 (xi = lam there: the
+    reference state gives xi = 1). Without viscous terms every method does nothing.
     """
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, q0: np.ndarray):
         self.scene, self.terms = scene, viscous_terms(scene)
-        edges = scene.meridian.edges.shape[0]
+        kin = scene.kinematics(q0)
+        relaxed = np.log(np.stack([kin.lam1, kin.lam2]))
         # during the run, an evaluation outside a solve (the first acceleration, the frames'
         # energies) sees the networks' stored energy at their present internal stretches
         self._limits = [term.limit for term in self.terms]
-        for term in self.terms:
-            term.reset()
-            term.state(edges)
+        for term in self.terms:          # the networks start relaxed at q0 (xi = lam: at rest there long)
+            term.reset(np.repeat(relaxed[None], term.networks, axis=0))
             term.limit = "instantaneous"
         self.previous = None               # zeta_{n-1} of every term (the scheme's history)
         self.dissipated = 0.0              # [J] since the start
