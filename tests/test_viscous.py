@@ -23,7 +23,7 @@ from snapmem.dynamics.driver import simulate
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.errors import SnapmemError
 from snapmem.model.viscous import ViscousNetworks, network_log_derivatives
-from snapmem.reference.exact import balloon_stretch
+from snapmem.reference.exact import balloon_limit_point, balloon_stretch
 from snapmem.statics import equilibrium
 
 R, H, C1, C2 = 10.0, 0.1, 0.4375, 0.0625
@@ -169,3 +169,34 @@ def test_elastic_scene_is_unchanged_and_bad_networks_are_refused():
     two = build_scene("balloon", nodes=11, viscous_mu="0.5,0.2", relaxation_time="1,0.1").terms[-1]
     np.testing.assert_array_equal(two.moduli, [0.5, 0.2])
     np.testing.assert_array_equal(two.times, [1.0, 0.1])
+
+
+def snap_time(scene, rate, t_end):
+    """The time [s] the balloon under p = rate t passes lam = 2 (past its limit point at about 1.5)."""
+    options = DynamicsOptions(scheme="euler", dt=1e-4 * t_end, adaptive=True, dt_max=t_end / 200, save_interval=0.0)
+    traj = simulate(scene, {"pressure": [(0.0, 0.0), (t_end, rate * t_end)]}, t_end, rho=RHO, damping=DAMPING,
+                    options=options, stop=lambda t, q, v: q[0::2].max() / R > 2.5)
+    lam = traj["r"].max(axis=1) / R
+    passed = np.flatnonzero(lam > 2.0)
+    assert passed.size, "no snap"
+    return float(traj["t"][passed[0]])
+
+
+def test_snap_under_a_ramp_is_delayed_at_fast_rates_and_elastic_at_slow_rates(scene):
+    """The ramp reaches the relaxed limit pressure p_LP at t_LP. Fast (t_LP = 0.1 tau): the networks stay
+    glassy and the snap comes with the glassy balloon's (c1 + mu_v / 2), over 20% later than the
+    elastic one. Slow (t_LP = 10, 100, 1000 tau): the delay falls to the elastic prediction."""
+    p_lp = balloon_limit_point(R, H, C1, C2)[1]
+    p_glassy = balloon_limit_point(R, H, C1 + MU_V / 2, C2)[1]
+    elastic = build_scene("balloon", nodes=NODES, support="free")
+    glassy = build_scene("balloon", nodes=NODES, support="free", c1=C1 + MU_V / 2)
+
+    def times(t_lp, *scenes):
+        return [snap_time(s, p_lp / t_lp, 2.0 * t_lp * p_glassy / p_lp) for s in scenes]
+
+    t_visco, t_elastic, t_glassy = times(0.1 * TAU, scene, elastic, glassy)
+    assert t_visco > 1.2 * t_elastic
+    assert abs(t_visco / t_glassy - 1.0) < 0.02
+    delays = [t_v / t_e - 1.0 for t_v, t_e in (times(t_lp, scene, elastic) for t_lp in (10 * TAU, 100 * TAU, 1000 * TAU))]
+    assert delays[0] > delays[1] > delays[2] > 0.0
+    assert delays[1] < 0.6 * delays[0] and delays[2] < 0.6 * delays[1] and delays[2] < 0.02
