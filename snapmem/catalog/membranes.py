@@ -22,6 +22,7 @@ from snapmem.model.meridian import Meridian, disc, sphere, torus
 from snapmem.model.parameters import MAX_NODES, nodes_note
 from snapmem.model.scene import Scene
 from snapmem.model.terms import Electric, PressureWork, Stretching
+from snapmem.model.viscous import VISCOUS_LIMITS, ViscousNetworks
 
 def common_parameters(nodes: int, H=None) -> tuple:
     """``nodes`` and the reference thickness ``H`` [m] (None: set by the scene's defaults)."""
@@ -68,7 +69,50 @@ def material_parameters(material="mooney_rivlin", c1=0.4375, c2=0.0625, eps=1.0,
            Parameter("eps", eps, eps_unit, "permittivity", minimum=0.0, open_min=True),
            Parameter("pressure", 0.0, pressure_unit, "pressure difference inside minus outside"))
         + real_membrane_parameters(voltage_unit)
+        + viscous_parameters(mu_unit)
     )
+
+
+class ListParameter(Parameter):
+    """A parameter that takes one positive value or several: a number, a sequence of numbers, or
+    text 'a,b,c' (as from ``--set NAME=a,b,c``); its value is a tuple of floats."""
+
+    def check(self, value, parse_text: bool = True):
+        if value is None:
+            return None
+        if isinstance(value, str):
+            items = [item for item in value.split(",")] if parse_text else [value]
+        elif np.ndim(value) == 0:
+            items = [value]
+        else:
+            items = list(value)
+        if not items:
+            raise SnapmemError(f"{self.name} = {value!r}: give at least one value")
+        one = Parameter(**self.__dict__)
+        return tuple(float(one.check(item, parse_text)) for item in items)
+
+
+def viscous_parameters(mu_unit="Pa") -> tuple:
+    """The non-equilibrium networks of a viscoelastic membrane (:mod:`snapmem.model.viscous`)."""
+    positive = {"minimum": 0.0, "open_min": True}
+    return (ListParameter("viscous_mu", None, mu_unit, "shear moduli of the non-equilibrium (viscous) networks, "
+                          "one value or a list 'a,b' (None: elastic)", **positive),
+            ListParameter("relaxation_time", None, "s", "relaxation times of the viscous networks, one per "
+                          "viscous_mu", **positive),
+            Parameter("viscous_limit", "relaxed", "", "the static limit of a viscoelastic law (statics): "
+                      "'relaxed' (equilibrium network alone) or 'instantaneous' (all networks, xi = 1)", str,
+                      choices=VISCOUS_LIMITS))
+
+
+def viscous_term(params: dict) -> ViscousNetworks | None:
+    """The scene's viscous networks, or None for an elastic membrane (``viscous_mu`` not set)."""
+    moduli, times = params.get("viscous_mu"), params.get("relaxation_time")
+    if moduli is None and times is None:
+        return None
+    if moduli is None or times is None or len(moduli) != len(times):
+        raise SnapmemError(f"viscous_mu = {moduli!r}, relaxation_time = {times!r}: set both, one relaxation "
+                           "time per viscous modulus")
+    return ViscousNetworks(moduli, times, params.get("viscous_limit", "relaxed"))
 
 
 def real_membrane_parameters(voltage_unit="V") -> tuple:
@@ -133,11 +177,13 @@ def build_membrane(params: dict, with_loads: tuple, meridian: Meridian, fixed, n
     law = scene_law(params)
     voltage = _voltage(params, law.mu)
     terms = [Stretching(mounted_law(params, law)), PressureWork()]
+    loads = {"pressure": params["pressure"]}
     if voltage != 0.0 or "voltage" in with_loads:
         terms.append(Electric(params["eps"], H))
-    loads = {"pressure": params["pressure"]}
-    if len(terms) == 3:
         loads["voltage"] = voltage
+    viscous = viscous_term(params)
+    if viscous is not None:
+        terms.append(viscous)
     terms.extend(make(law) for make in constraints)
     return Scene(meridian, H, terms, fixed=fixed, loads=loads, name=name, parameters=_recorded(params, law),
                  start_guess=start_guess, probes=probes)

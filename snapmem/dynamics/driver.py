@@ -23,7 +23,7 @@ import numpy as np
 from snapmem.dynamics.loads import as_schedule, schedule
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.schemes import SCHEME_BY_NAME
-from snapmem.dynamics.stepper import _Recorder, _Stepper
+from snapmem.dynamics.stepper import _InternalState, _Recorder, _Stepper
 from snapmem.dynamics.trajectory import Trajectory
 from snapmem.errors import SolverError, check_real
 from snapmem.io.interrupts import HeldInterrupts
@@ -102,6 +102,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     if why is not None:
         raise SolverError(f"initial state is outside the model's domain: {why}")
     stepper = _Stepper(scene, mass, c, options)
+    internal = _InternalState(scene, q)      # viscous networks' internal stretches (none: does nothing)
     free = scene.free
 
     last_loads = [None, None]
@@ -117,10 +118,10 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         a[free] = -(g[free] + c[free] * v[free]) / mass[free]
         return a
 
-    recorder = _Recorder(scene, mass, options.save_interval, stepper.compiled)
+    recorder = _Recorder(scene, mass, options.save_interval, stepper.compiled, internal)
     a_prev = acceleration(q, v, t0)
     t, dt = t0, min(options.dt, max(t_end - t0, options.dt_min))
-    recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)
+    recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True, internal=internal.frame())
     steps = rejected = iterations = fallbacks = cuts = 0
     history = None                                     # (q_{n-1}, v_{n-1}, dt_{n-1}) of the last step
     status = "completed"
@@ -143,7 +144,9 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             if t_end - (t + dt) < 1e-3 * dt:
                 dt = t_end - t
             anchor = scheme.anchor(q, v, t, dt, history)
+            internal.open(scheme, t, dt, history)
             y, report = stepper.solve(anchor.q, anchor.v, anchor.h, loads_at(anchor.load_time), current=anchor.start)
+            internal.close(y if report.converged else None, dt)
             iterations += report.iterations
             cuts += report.step_cuts
             if not report.converged:
@@ -160,8 +163,10 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 # the extrapolation crossed a contact gap (or a lock): take this step by the fallback
                 # scheme instead, whose state is Newton's own and so always admissible
                 anchor = fallback.anchor(q, v, t, dt, history)
+                internal.open(fallback, t, dt, history)
                 y, report_fallback = stepper.solve(anchor.q, anchor.v, anchor.h, loads_at(anchor.load_time),
                                                    current=anchor.start)
+                internal.close(y if report_fallback.converged else None, dt)
                 iterations += report_fallback.iterations
                 if not report_fallback.converged:
                     rejected += 1
@@ -187,13 +192,15 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                     continue
             # one assignment, so that an interrupt cannot leave t and the state apart
             t, history, q, v, a_prev = t + dt, (q, v, dt), q_new, v_new, a_new
+            internal.commit()
             steps += 1
             recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations,
-                            force=t >= t_end - 1e-12 * max(1.0, abs(t_end)))
+                            force=t >= t_end - 1e-12 * max(1.0, abs(t_end)), internal=internal.frame())
             if progress is not None:
                 progress(t, t_end)
             if stop is not None and stop(t, q, v):
-                recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations, force=True)
+                recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations, force=True,
+                                internal=internal.frame())
                 break
             if options.adaptive:
                 grow = 2.0 if err == 0.0 else min(2.0, 0.9 * err ** (-1.0 / (order + 1)))
@@ -209,11 +216,12 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         status = f"interrupted at t = {t:.6g} s"
     except BaseException:
         held.__exit__(None, None, None)
+        internal.finish()
         raise
     try:                                               # held until the frames are whole
         if status != "completed":
             log.warning("simulation stopped early: %s", status)
-            recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True)
+            recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True, internal=internal.frame())
         elif stop is not None and t < t_end - 1e-12 * max(1.0, abs(t_end)):
             status = "stopped by the stop condition"
         meta = {"scene": scene.name, "status": status, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
@@ -223,6 +231,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 "bodies": [b.name for b in scene.bodies], "options": asdict(options),
                 "interrupted": False}
         trajectory = recorder.trajectory(meta)
+        internal.finish()
         trajectory.meta["interrupted"] = held.received is not None or status.startswith("interrupted")
         return trajectory
     finally:

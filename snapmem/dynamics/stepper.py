@@ -23,6 +23,7 @@ from snapmem.dynamics.trajectory import Trajectory
 from snapmem.model.contact import contact_report, contact_terms
 from snapmem.model.local_checks import failure_margins_many
 from snapmem.model.scene import Evaluation, Scene
+from snapmem.model.viscous import viscous_terms
 from snapmem.solvers.newton import newton
 
 EPS = float(np.finfo(float).eps)
@@ -73,6 +74,89 @@ class _Stepper:
         return y, report
 
 
+class _InternalState:
+    """The internal stretches of the scene's viscous networks (:mod:`snapmem.model.viscous`) across steps.
+
+    They follow the step's scheme exactly as the positions do: the scheme's anchor of the state
+    zeta (its x_hat, with the same h) opens the networks' incremental potential before the solve,
+    and the scheme's ``new_state`` turns the solve's zeta*(y) into zeta_{n+1} (the midpoint rule:
+    2 zeta* - zeta_n). The networks start relaxed at the initial state q0 (xi = lam there: the
+    reference state gives xi = 1). Without viscous terms every method does nothing.
+    """
+
+    def __init__(self, scene: Scene, q0: np.ndarray):
+        self.scene, self.terms = scene, viscous_terms(scene)
+        kin = scene.kinematics(q0)
+        relaxed = np.log(np.stack([kin.lam1, kin.lam2]))
+        # during the run, an evaluation outside a solve (the first acceleration, the frames'
+        # energies) sees the networks' stored energy at their present internal stretches
+        self._limits = [term.limit for term in self.terms]
+        for term in self.terms:          # the networks start relaxed at q0 (xi = lam: at rest there long)
+            term.reset(np.repeat(relaxed[None], term.networks, axis=0))
+            term.limit = "instantaneous"
+        self.previous = None               # zeta_{n-1} of every term (the scheme's history)
+        self.dissipated = 0.0              # [J] since the start
+        self._anchors = self._pending = None
+
+    def open(self, scheme, t: float, dt: float, history) -> None:
+        """Before a solve: the anchor of every term's incremental potential for ``scheme``'s step."""
+        if not self.terms:
+            return
+        self._anchors = []
+        for i, term in enumerate(self.terms):
+            z = term.zeta.ravel()
+            past = None if history is None or self.previous is None else (
+                self.previous[i].ravel(), np.zeros_like(z), history[2])
+            anchor = scheme.anchor(z, np.zeros_like(z), t, dt, past)
+            term.begin_step(anchor.h, anchor.q.reshape(term.zeta.shape))
+            self._anchors.append(anchor)
+
+    def close(self, y: np.ndarray | None, dt: float) -> None:
+        """After a solve: the step's new internal state at y (None: the solve failed), kept pending."""
+        if not self.terms:
+            return
+        pending = []
+        if y is not None:
+            kin = self.scene.kinematics(y)
+            for term, anchor in zip(self.terms, self._anchors):
+                star = term.internal(kin)
+                new = anchor.new_state(star.ravel())[0].reshape(star.shape)
+                pending.append((new, term.step_dissipation(star, dt, self.scene.weight)))
+        for term in self.terms:
+            term.end_step()
+        self._pending = pending or None
+
+    def commit(self) -> None:
+        """The step was accepted: its pending internal state becomes the state."""
+        if not self.terms or self._pending is None:
+            return
+        self.previous = [term.zeta for term in self.terms]
+        for term, (new, dissipated) in zip(self.terms, self._pending):
+            term.commit(new)
+            self.dissipated += dissipated
+        self._pending = None
+
+    def finish(self) -> None:
+        """The run is over: the terms back to their static limits (their last state kept)."""
+        for term, limit in zip(self.terms, self._limits):
+            term.end_step()
+            term.limit = limit
+
+    def set_frame(self, xi: np.ndarray) -> None:
+        """Put a frame's internal stretches ``xi`` (K, 2, E) back into the terms (to measure it)."""
+        start = 0
+        for term in self.terms:
+            term.zeta = np.log(xi[start: start + term.networks])
+            start += term.networks
+
+    def frame(self) -> dict:
+        """What a frame records: ``xi`` (K, 2, E) the internal stretches of every network (all terms'
+        networks stacked), ``dissipation`` [J] dissipated by the dashpots since the start."""
+        if not self.terms:
+            return {}
+        return {"xi": np.exp(np.concatenate([term.zeta for term in self.terms])), "dissipation": self.dissipated}
+
+
 class _Recorder:
     """Collects frames: the state every frame, the smallest contact gap every step; the frames'
     energies, volumes and contact reports when the trajectory is built.
@@ -81,8 +165,10 @@ class _Recorder:
     frames (``CompiledStep.measures_many``) instead of three assemblies per frame.
     """
 
-    def __init__(self, scene: Scene, mass, interval: float, compiled: CompiledStep | None = None):
+    def __init__(self, scene: Scene, mass, interval: float, compiled: CompiledStep | None = None,
+                 internal: _InternalState | None = None):
         self.scene, self.mass, self.interval, self.compiled = scene, mass, interval, compiled
+        self.internal = internal
         self.contacts = contact_terms(scene)
         self.rows: list[dict] = []
         self.last_t = -np.inf
@@ -98,7 +184,7 @@ class _Recorder:
                 if t in self.contacts]
         return min(gaps)
 
-    def record(self, t, q, v, loads, dt, iterations, force=False):
+    def record(self, t, q, v, loads, dt, iterations, force=False, internal=None):
         if not force and t - self.last_t < self.interval:
             self.min_gap = min(self.min_gap, self._gap(q))
             return
@@ -106,7 +192,7 @@ class _Recorder:
             self.rows.pop()
         kinetic = 0.5 * float(self.mass @ (v * v))
         self.rows.append({"t": t, "q": q.copy(), "v": v.copy(), "kinetic": kinetic, "dt": dt, "newton": iterations,
-                          "min_gap": self.min_gap, "loads": loads})    # the frame's own gap joins it when measured
+                          "min_gap": self.min_gap, "loads": loads, **(internal or {})})    # the frame's own gap joins it when measured
         self.last_t = t
         self.min_gap = np.inf
 
@@ -117,6 +203,14 @@ class _Recorder:
         scene = self.scene
         reports = [contact_report(scene, q) for q in Q]
         columns = {k: np.array([r[k] for r in reports]) for k in (reports[0] if reports else {})}
+        if self.internal is not None and self.internal.terms:       # each frame's networks' stored energy
+            energies = []
+            for q, each, row in zip(Q, loads, self.rows):
+                self.internal.set_frame(row["xi"])
+                energies.append(scene.energy(q, each))
+            self.internal.set_frame(self.rows[-1]["xi"])
+            return (np.array(energies), np.array([scene.volume(q) for q in Q]), np.array([self._gap(q) for q in Q]),
+                    columns)
         return (np.array([scene.energy(q, each) for q, each in zip(Q, loads)]),
                 np.array([scene.volume(q) for q in Q]), np.array([self._gap(q) for q in Q]), columns)
 

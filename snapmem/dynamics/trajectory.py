@@ -23,6 +23,10 @@ class Trajectory:
         ``<name>_v`` [m/s], and the failure margins ``breakdown_margin`` and ``rupture_margin``
         (each fails at 1, inf where the scene sets no limit:
         :func:`snapmem.model.local_checks.failure_margins`).
+        A scene with viscous networks (:mod:`snapmem.model.viscous`) adds ``xi`` (T, K, 2, E), the
+        internal stretches (meridional, hoop) of each of its K networks on every edge, and
+        ``dissipation`` [J], the energy its dashpots dissipated since the start; its ``potential``
+        includes the networks' stored energy at each frame's internal stretches.
     meta : dict
         Scene name and parameters, scheme, rho, damping, step and iteration counts, wall time.
     """
