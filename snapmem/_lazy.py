@@ -19,6 +19,7 @@ pandas 0.2 s, scipy.optimize with scipy.linalg 0.35 s.
 from __future__ import annotations
 
 import importlib
+import sys
 import types
 
 __all__ = ["Kernel", "function", "module", "njit", "materialized"]
@@ -107,6 +108,7 @@ class Kernel:
             for cell in self.py_func.__closure__ or ():          # kernels defined in a function
                 if isinstance(cell.cell_contents, Kernel):
                     cell.cell_contents = cell.cell_contents.dispatcher
+            _rebind(self, self._dispatcher)
         return self._dispatcher
 
     @property
@@ -115,11 +117,25 @@ class Kernel:
         return [] if self._dispatcher is None else list(self._dispatcher.signatures)
 
     def __call__(self, *args):
-        return self.dispatcher(*args)
+        dispatcher = self._dispatcher
+        return (dispatcher if dispatcher is not None else self.dispatcher)(*args)
 
     def __repr__(self) -> str:
         state = "dispatcher made" if self._dispatcher is not None else "not compiled yet"
         return f"<compiled kernel {self.__module__}.{self.__qualname__} ({state})>"
+
+
+def _rebind(kernel: "Kernel", dispatcher) -> None:
+    """Point every name in a loaded snapmem module that holds ``kernel`` (``from ... import``
+    copies) at its dispatcher, so later calls go to numba without this wrapper's Python call
+    (docs/performance.md)."""
+    for module in list(sys.modules.values()):
+        namespace = getattr(module, "__dict__", None)
+        if namespace is None or not getattr(module, "__name__", "").startswith("snapmem"):
+            continue
+        for name, value in list(namespace.items()):
+            if value is kernel:
+                namespace[name] = dispatcher
 
 
 def _global_names(code) -> set[str]:
