@@ -48,7 +48,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import brentq
 
-from snapmem.continuation.problems import make_problem
+from snapmem.continuation.problems import ProblemsByValue, make_problem
 from snapmem.continuation.unfold import IMPERFECTION_LIMIT
 from snapmem.errors import SnapmemError, SolverError
 from snapmem.kernels.banded import BorderedMatrix
@@ -108,7 +108,7 @@ class _System:
     def __init__(self, scene_at: Callable[[float], Scene], control: str, v0: float, v_scale: float,
                  psi: np.ndarray | None = None, x0: np.ndarray | None = None, lam0: float = 0.0):
         self.scene_at, self.control = scene_at, control
-        self._problems: dict = {}
+        self.problem = ProblemsByValue(scene_at, control)
         pb = self.problem(v0)
         self.tol = 1e-10 * pb.scene.force_scale
         self.L = pb.scene.meridian.size
@@ -128,14 +128,6 @@ class _System:
     def extra(self) -> int:
         """Unknowns beside x: (lam, v), or (lam, sigma, v) for an unfolded BP."""
         return self.w_extra.size
-
-    def problem(self, v):
-        """The problem at v (the last few cached: each Newton iteration asks for v and v +- h)."""
-        if v not in self._problems:
-            if len(self._problems) > 16:
-                self._problems.clear()
-            self._problems[v] = make_problem(self.scene_at(v), self.control)
-        return self._problems[v]
 
     def g_of(self, pb, x, lam, phi):
         """(g, w, K, R, lu): the bordered test function and its vector at (x, lam) of problem pb,

@@ -28,7 +28,7 @@ import pandas as pd
 
 from snapmem.continuation.branch import PointKind
 from snapmem.continuation.codim2 import singular_curve
-from snapmem.continuation.problems import make_problem
+from snapmem.continuation.problems import ProblemsByValue
 from snapmem.continuation.tracer import trace
 from snapmem.errors import SnapmemError, SolverError
 from snapmem.kernels.banded import BorderedMatrix
@@ -54,19 +54,12 @@ class _EventSystem:
 
     def __init__(self, scene_at, control, measure, level, v0, v_scale):
         self.scene_at, self.control, self.measure, self.level = scene_at, control, measure, level
-        self._problems: dict = {}
+        self.problem = ProblemsByValue(scene_at, control)
         pb = self.problem(v0)
         self.tol = 1e-10 * pb.scene.force_scale
         self.wx, self.wl, self.wv = pb.x_weight, 1.0 / pb.lam_scale ** 2, 1.0 / v_scale ** 2
         self.v_scale = v_scale
         self.iterations = 0
-
-    def problem(self, v):
-        if v not in self._problems:
-            if len(self._problems) > 16:
-                self._problems.clear()
-            self._problems[v] = make_problem(self.scene_at(v), self.control)
-        return self._problems[v]
 
     def values(self, pb, x, lam) -> np.ndarray:
         q, loads = pb.state(x, lam)

@@ -261,3 +261,19 @@ def make_problem(scene: Scene, control: str) -> LoadProblem:
             raise SnapmemError(f"control = 'volume': scene {scene.name!r} has no pressure term")
         return VolumeProblem(scene)
     return LoadProblem(scene, control)
+
+
+class ProblemsByValue:
+    """``make_problem(scene_at(v), control)`` for a second parameter v, the last few kept (a curve's
+    Newton iteration asks for v and v +- h at every step)."""
+
+    def __init__(self, scene_at, control: str, keep: int = 16):
+        self.scene_at, self.control, self.keep = scene_at, control, keep
+        self._problems: dict = {}
+
+    def __call__(self, v):
+        if v not in self._problems:
+            if len(self._problems) > self.keep:
+                self._problems.clear()
+            self._problems[v] = make_problem(self.scene_at(v), self.control)
+        return self._problems[v]
