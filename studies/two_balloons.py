@@ -13,7 +13,6 @@ values: relative error and observed order, expected 2), two_balloons.branches.cs
 N = 101) and two_balloons.png.
 """
 
-import math
 
 import numpy as np
 import pandas as pd

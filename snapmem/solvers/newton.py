@@ -1,4 +1,4 @@
-"""Newton's method on a scene's residual, and equilibria reached by loading from rest.
+"""Newton's method on a scene's residual (equilibria reached by loading from rest: :mod:`snapmem.statics`).
 
 Each iteration is one assembly (gradient and banded K at the trial point) and one band
 factorisation and solve. The step is cut (i) to keep free radii positive (fraction to the
@@ -12,7 +12,6 @@ is cut.
 
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
@@ -23,9 +22,7 @@ from snapmem.errors import check_array, check_int, check_real
 from snapmem.model.scene import Evaluation, Scene
 from snapmem.solvers import rules
 from snapmem.solvers.status import STATUSES, Status  # noqa: F401  (STATUSES: cited here by README and sweeps)
-from snapmem.threads import single_threaded
 
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
