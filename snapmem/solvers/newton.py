@@ -24,7 +24,6 @@ from snapmem.solvers import rules
 from snapmem.solvers.status import STATUSES, Status  # noqa: F401  (STATUSES: cited here by README and sweeps)
 
 
-
 @dataclass(frozen=True)
 class NewtonOptions:
     """Tolerances and limits of the Newton solver.
