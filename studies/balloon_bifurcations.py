@@ -46,19 +46,16 @@ def points(E_hat: float, support: str, nodes: int) -> pd.DataFrame:
 
 def draw(t: pd.DataFrame, path) -> None:
     """|stretch - criterion| against N, one line per critical point, legend beside the axes."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    from snapmem.viz import style
+    fig, ax = style.axes()
     for (kind, mode), sub in t.groupby(["kind", "mode"]):
-        ax.loglog(sub["nodes"], sub["error"].abs(), "o-", ms=3, label=kind if mode < 0 else f"{kind} n = {mode}")
-    ax.set_xlabel("nodes N")
-    ax.set_ylabel("|stretch - criterion root|")
-    ax.set_title(f"Balloon, E_hat = {t['E_hat_value'].iloc[0]:g}, support {t['support'].iloc[0]}")
-    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5))
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+        ax.plot(sub["nodes"], sub["error"].abs(), "o-", ms=3, label=kind if mode < 0 else f"{kind} n = {mode}")
+    style.log_axis(ax)
+    ax.set_xlabel(style.label("nodes"))
+    ax.set_ylabel(r"$|\lambda - \lambda_{\mathrm{criterion}}|$")
+    ax.set_title(f"balloon, {style.value_label('E_hat', t['E_hat_value'].iloc[0])}, support {t['support'].iloc[0]}")
+    style.legend(ax, title="critical point")
+    style.save(fig, path)
 
 
 def main(argv=None):
