@@ -9,18 +9,14 @@ the tube's and reservoir's ``dead_volume`` and the ambient ``p_atm``). The symme
 identical pair loses stability where one balloon's dp/dV = 0 (a BP), and the smaller balloon
 empties into the larger along the asymmetric branch that bifurcates there.
 
-``balloon`` gets the parameter ``chamber = pressure | gas`` here (after its own, registered in
-snapmem.catalog.membranes): ``chamber = gas`` inflates the balloon from a gas reservoir of volume
-``gas_volume`` (the chamber's dead volume) holding n R T = ``gas_amount``, traced with
-``--control gas_amount``. ``chamber = pressure`` (the default) is the balloon as it was, built by
-its own builder with the same recorded parameters.
+The balloon on a gas reservoir (``balloon --set chamber=gas``) is the ``balloon`` scene itself
+(snapmem.catalog.membranes).
 """
 
 from __future__ import annotations
 
 from snapmem.catalog.membranes import build_membrane, common_parameters, material_parameters
-from snapmem.catalog.registry import Parameter, SceneSpec, get_spec, register
-from snapmem.errors import SnapmemError
+from snapmem.catalog.registry import Parameter, SceneSpec, register
 from snapmem.model.chambers import Chamber, ChamberKind
 from snapmem.model.meridian import sphere
 from snapmem.model.multi import MultiScene
@@ -58,44 +54,3 @@ register(SceneSpec(
                  "p_atm times the reference chamber volume)", minimum=0.0, open_min=True))
     + tuple(p for p in material_parameters() if p.name != "pressure"),
     _two_balloons))
-
-
-# ---------------------------------------------------------------------------------------------
-# the balloon on a gas reservoir: ``balloon --set chamber=gas --set gas_volume=...``
-GAS_PARAMETERS = (
-    Parameter("chamber", "pressure", "", "what inflates the balloon: 'pressure' (prescribed) or 'gas' (a "
-              "reservoir of gas_volume holding gas_amount; trace with --control gas_amount)", str,
-              choices=("pressure", "gas")),
-    Parameter("gas_volume", 0.0, "m^3", "the gas reservoir's (and tubing's) volume besides the balloon "
-              "(chamber = gas)", minimum=0.0),
-    Parameter("p_atm", 0.25, "Pa", "ambient absolute pressure (chamber = gas; 0.25 mu ~ 1 bar for mu = 0.42 MPa)",
-              minimum=0.0, open_min=True),
-    Parameter("gas_amount", None, "J", "n R T of the gas when it is not the control (chamber = gas; default: "
-              "p_atm times the reference balloon's and reservoir's volume)", minimum=0.0, open_min=True))
-_GAS_NAMES = tuple(p.name for p in GAS_PARAMETERS)
-
-
-def _with_gas_chamber(pressure_builder):
-    """The balloon's builder taking ``chamber``: ``pressure`` builds as before (the chamber's
-    parameters dropped, so the recorded parameters are unchanged); ``gas`` puts the balloon on a
-    gas chamber of dead volume ``gas_volume`` (one membrane of a MultiScene)."""
-
-    def build(params: dict, with_loads: tuple):
-        own = {k: v for k, v in params.items() if k not in _GAS_NAMES}
-        if params["chamber"] == "pressure":
-            return pressure_builder(own, with_loads)
-        if params["pressure"] != 0.0:
-            raise SnapmemError(f"pressure = {params['pressure']:g} with chamber = gas: the gas sets the pressure "
-                               "(set gas_amount, or trace with --control gas_amount)")
-        balloon = pressure_builder(own, with_loads)
-        chamber = Chamber(ChamberKind.GAS, (0,), dead_volume=params["gas_volume"], p_atm=params["p_atm"],
-                          amount=params["gas_amount"])
-        recorded = {**balloon.parameters, **{k: params[k] for k in _GAS_NAMES}}
-        return MultiScene([balloon], [chamber], name="balloon", parameters=recorded)
-
-    return build
-
-
-_balloon = get_spec("balloon")
-register(SceneSpec(_balloon.name, _balloon.doc + "; or inflated from a gas reservoir (chamber = gas)",
-                   _balloon.declared + GAS_PARAMETERS, _with_gas_chamber(_balloon.builder)))

@@ -14,11 +14,13 @@ import numpy as np
 
 from snapmem.catalog.registry import Parameter, SceneSpec, register
 from snapmem.errors import SnapmemError
+from snapmem.model.chambers import Chamber, ChamberKind
 from snapmem.model.constraints import CentreOfMassHeight
 from snapmem.model.dofs import node_areas
 from snapmem.model.materials import LAWS, Law, law_class, law_name
 from snapmem.model.prestretch import Prestretched
 from snapmem.model.meridian import Meridian, disc, sphere, torus
+from snapmem.model.multi import MultiScene
 from snapmem.model.parameters import MAX_NODES, nodes_note
 from snapmem.model.scene import Scene
 from snapmem.model.terms import Electric, PressureWork, Stretching
@@ -252,6 +254,42 @@ def _torus(params, with_loads):
                           probes={"outer_radius": lambda q: float(q[0::2].max())})
 
 
+# ---------------------------------------------------------------------------------------------
+# the balloon on a gas reservoir: ``balloon --set chamber=gas --set gas_volume=...``
+GAS_PARAMETERS = (
+    Parameter("chamber", "pressure", "", "what inflates the balloon: 'pressure' (prescribed) or 'gas' (a "
+              "reservoir of gas_volume holding gas_amount; trace with --control gas_amount)", str,
+              choices=("pressure", "gas")),
+    Parameter("gas_volume", 0.0, "m^3", "the gas reservoir's (and tubing's) volume besides the balloon "
+              "(chamber = gas)", minimum=0.0),
+    Parameter("p_atm", 0.25, "Pa", "ambient absolute pressure (chamber = gas; 0.25 mu ~ 1 bar for mu = 0.42 MPa)",
+              minimum=0.0, open_min=True),
+    Parameter("gas_amount", None, "J", "n R T of the gas when it is not the control (chamber = gas; default: "
+              "p_atm times the reference balloon's and reservoir's volume)", minimum=0.0, open_min=True))
+_GAS_NAMES = tuple(p.name for p in GAS_PARAMETERS)
+
+
+def _with_gas_chamber(pressure_builder):
+    """The balloon's builder taking ``chamber``: ``pressure`` builds as before (the chamber's
+    parameters dropped, so the recorded parameters are unchanged); ``gas`` puts the balloon on a
+    gas chamber of dead volume ``gas_volume`` (one membrane of a MultiScene)."""
+
+    def build(params: dict, with_loads: tuple):
+        own = {k: v for k, v in params.items() if k not in _GAS_NAMES}
+        if params["chamber"] == "pressure":
+            return pressure_builder(own, with_loads)
+        if params["pressure"] != 0.0:
+            raise SnapmemError(f"pressure = {params['pressure']:g} with chamber = gas: the gas sets the pressure "
+                               "(set gas_amount, or trace with --control gas_amount)")
+        balloon = pressure_builder(own, with_loads)
+        chamber = Chamber(ChamberKind.GAS, (0,), dead_volume=params["gas_volume"], p_atm=params["p_atm"],
+                          amount=params["gas_amount"])
+        recorded = {**balloon.parameters, **{k: params[k] for k in _GAS_NAMES}}
+        return MultiScene([balloon], [chamber], name="balloon", parameters=recorded)
+
+    return build
+
+
 register(SceneSpec(
     "plate", "circular plate clamped at its rim, inflated from one side (paper Fig. 3d)",
     common_parameters(101, H=0.5)
@@ -260,14 +298,15 @@ register(SceneSpec(
     build_plate))
 
 register(SceneSpec(
-    "balloon", "spherical balloon, poles on the axis (paper Figs 3e, 4)",
+    "balloon", "spherical balloon, poles on the axis (paper Figs 3e, 4); or inflated from a gas reservoir "
+    "(chamber = gas)",
     common_parameters(101, H=0.1)
     + (Parameter("R", 10.0, "m", "sphere radius", minimum=0.0, open_min=True),
        Parameter("support", "pole", "", "what removes the rigid translation: 'pole' (the south pole's z "
                  "held) or 'free' (the centre of mass height held by a multiplier; keeps the up-down "
                  "symmetry)", str))
-    + material_parameters(),
-    _balloon))
+    + material_parameters() + GAS_PARAMETERS,
+    _with_gas_chamber(_balloon)))
 
 register(SceneSpec(
     "torus", "toroidal membrane, circle of radius Rs about (Rb, 0) (paper Figs 3f, 5)",
