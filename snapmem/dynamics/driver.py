@@ -104,6 +104,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     stepper = _Stepper(scene, mass, c, options)
     internal = _InternalState(scene, q)      # viscous networks' internal stretches (none: does nothing)
     free = scene.free
+    massive = free[mass[free] > 0]          # a constraint's multiplier (support = free) has no mass, nor acceleration
 
     last_loads = [None, None]
 
@@ -115,7 +116,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     def acceleration(q, v, t):
         a = np.zeros_like(q)
         g = scene.evaluate(q, loads_at(t), order=1).gradient
-        a[free] = -(g[free] + c[free] * v[free]) / mass[free]
+        a[massive] = -(g[massive] + c[massive] * v[massive]) / mass[massive]
         return a
 
     recorder = _Recorder(scene, mass, options.save_interval, stepper.compiled, internal)
