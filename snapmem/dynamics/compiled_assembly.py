@@ -28,7 +28,8 @@ from snapmem.kernels.assembly import (edge_assembly, edge_stretches, linear_law_
                                      residual_floor, state_check)
 from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,
                                     linear_barrier, linear_max_step, linear_min_gap)
-from snapmem.kernels.laws import electric_density, law_admissible, law_density
+from snapmem.kernels.laws import electric_density, law_admissible, law_density, prestretch_chain
+from snapmem.kernels.viscous import log_to_stretch, network_condensed, network_internal
 from snapmem.model.contact import FRACTION_TO_BOUNDARY
 
 #: The assembly's order: energy and residual (GRADIENT), and the tangent (TANGENT).
@@ -38,6 +39,7 @@ GRADIENT, TANGENT = np.int64(1), np.int64(2)
 # membrane, its law and the scatter maps (Plan), and each kind of term the scene may not have.
 Plan = namedtuple("Plan", [
     "edges", "inv_length", "inv_mid_radius", "weight", "law_kind", "law_params",   # membrane; law: LAW_*
+    "law_stretch",                                                        # the law's prestretches (2,)
     "hess_index", "band_size", "n_band", "bandwidth", "free", "radius_dofs", "n_node_dofs", "n_bodies",
     "edge_dofs", "edge_pos", "node_hess",                                 # scatter maps of node and edge terms
 ])
@@ -46,25 +48,65 @@ GeneralLaw = namedtuple("GeneralLaw", ["law_kind", "law_params"])
 #: The linear-gap contacts (rod, shell, plane): contact c holds nodes lin_nodes[lin_ptr[c]:lin_ptr[c + 1]].
 LinearContacts = namedtuple("LinearContacts", ["lin_nodes", "lin_ptr", "lin_axis", "lin_sign", "lin_offset",
                                                "lin_dhat", "lin_coef"])
+#: Viscous networks: moduli, Gent locks (inf: neo-Hookean), c = eta / h of the open step (0: none,
+#: the internal stretches held at zeta_hat), the step's anchor zeta_hat (K, 2, E) and the local
+#: solves' warm start (K, 2, E), updated in place by every assembly (after it: zeta* there).
+Viscous = namedtuple("Viscous", ["visc_mu", "visc_jlim", "visc_c", "zeta_hat", "zeta_warm"])
 #: The balls (edge contact), with the degree of freedom and border column of a ball's body (-1: fixed).
 Balls = namedtuple("Balls", ["ball_radius", "ball_dhat", "ball_coef", "ball_z0", "ball_dof", "ball_col",
                              "ball_weight"])
 
 
 @njit(cache=True, nogil=True)
-def assemble(q, P, general_law, linear, balls, pressure, a_el, inertia, anchor, momentum, order):
+def law_with_networks(lam1, lam2, P, general_law, viscous):
+    """The law's density at the mounted stretches (lam1, lam2) (its prestretches applied) plus the
+    viscous networks' condensed one, (w, w1, w2, w11, w12, w22) each (E,), and whether every local
+    flow-rule solve converged. The networks' solutions are left in ``viscous.zeta_warm``."""
+    lp1, lp2 = P.law_stretch[0], P.law_stretch[1]
+    stretched = lp1 != 1.0 or lp2 != 1.0
+    l1, l2 = (lp1 * lam1, lp2 * lam2) if stretched else (lam1, lam2)
+    if general_law is None:               # LAW_LINEAR: law_density's first branch
+        w, w1, w2, w11, w12, w22 = linear_law_density(l1, l2, P.law_params[0], P.law_params[1])
+    else:
+        w, w1, w2, w11, w12, w22 = law_density(l1, l2, general_law.law_kind, general_law.law_params)
+    if stretched:
+        w, w1, w2, w11, w12, w22 = prestretch_chain(w, w1, w2, w11, w12, w22, lp1, lp2)
+    ok = True
+    if viscous is not None:
+        eps1, eps2 = np.log(lam1), np.log(lam2)
+        n = lam1.size
+        t = (np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
+        for k in range(viscous.visc_mu.size):
+            c, hat, warm = viscous.visc_c[k], viscous.zeta_hat[k], viscous.zeta_warm[k]
+            if c > 0.0:
+                z1, z2, done = network_internal(eps1, eps2, warm[0], warm[1], hat[0], hat[1], viscous.visc_mu[k],
+                                                viscous.visc_jlim[k], c)
+                ok = ok and done
+                warm[0, :] = z1
+                warm[1, :] = z2
+            else:
+                z1, z2 = hat[0], hat[1]
+            parts = network_condensed(eps1, eps2, z1, z2, hat[0], hat[1], viscous.visc_mu[k], viscous.visc_jlim[k],
+                                      c)
+            t = (t[0] + parts[0], t[1] + parts[1], t[2] + parts[2], t[3] + parts[3], t[4] + parts[4],
+                 t[5] + parts[5])
+        v, v1, v2, v11, v12, v22 = log_to_stretch(lam1, lam2, t[0], t[1], t[2], t[3], t[4], t[5])
+        w, w1, w2, w11, w12, w22 = w + v, w1 + v1, w2 + v2, w11 + v11, w12 + v12, w22 + v22
+    return w, w1, w2, w11, w12, w22, ok
+
+
+@njit(cache=True, nogil=True)
+def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia, anchor, momentum, order):
     """The step's incremental potential Pi(q) + (1/2) d^T diag(inertia) d - momentum . d, d = (q -
     anchor) on the free degrees of freedom: (energy, residual, lower, border, corner, floor); the
     band, border and corner only at ``order`` 2 (zeros below). Energy inf if a contact gap is not positive.
 
     The same terms as ``Scene.evaluate`` (which documents them) for the declared terms, by the
-    same kernels and formulas; ``general_law``, ``linear``, ``balls``: the terms or None (module docstring).
+    same kernels and formulas; ``general_law``, ``linear``, ``balls``, ``viscous``: the terms or None
+    (module docstring). Energy inf also where a local flow-rule solve of the networks fails.
     """
     lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
-    if general_law is None:               # LAW_LINEAR: law_density's first branch
-        w, w1, w2, w11, w12, w22 = linear_law_density(lam1, lam2, P.law_params[0], P.law_params[1])
-    else:
-        w, w1, w2, w11, w12, w22 = law_density(lam1, lam2, general_law.law_kind, general_law.law_params)
+    w, w1, w2, w11, w12, w22, local_ok = law_with_networks(lam1, lam2, P, general_law, viscous)
     if a_el != 0.0:                       # the electric term(s), -a lam1^2 lam2^2
         for e in range(w.size):
             ew, e1, e2, e11, e12, e22 = electric_density(lam1[e], lam2[e], a_el)
@@ -74,7 +116,7 @@ def assemble(q, P, general_law, linear, balls, pressure, a_el, inertia, anchor, 
             w11[e] += e11
             w12[e] += e12
             w22[e] += e22
-    energy = 0.0
+    energy = 0.0 if local_ok else np.inf
     for e in range(w.size):
         energy += P.weight[e] * w[e]
     gradient, band, volume, force = edge_assembly(q, P.edges, P.inv_length, P.inv_mid_radius, P.weight, w1, w2, w11,
@@ -174,7 +216,8 @@ def state_ok(q, P, general_law):
     if general_law is None:                  # LAW_LINEAR: every positive stretch is inside
         return True
     lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
-    return law_admissible(lam1, lam2, general_law.law_kind, general_law.law_params)
+    return law_admissible(P.law_stretch[0] * lam1, P.law_stretch[1] * lam2, general_law.law_kind,
+                          general_law.law_params)
 
 
 @njit(cache=True, nogil=True)

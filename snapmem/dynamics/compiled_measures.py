@@ -18,7 +18,8 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
     coefficient): potential energy [J], volume [m^3], and the total normal force [N] and smallest
     gap [m] of every contact, linear ones first, then balls: energies (T,), volumes (T,), forces
     (T, C), gaps (T, C). ``general_law``, ``linear``, ``balls``: those terms or None (see
-    :mod:`snapmem.dynamics.compiled_assembly`)."""
+    :mod:`snapmem.dynamics.compiled_assembly`); without viscous networks (their stored energy
+    depends on each frame's internal stretches: CompiledStep.measures_many adds it)."""
     T = Q.shape[0]
     n_lin = 0 if linear is None else linear.lin_axis.size
     n_contacts = n_lin + (0 if balls is None else balls.ball_radius.size)
@@ -27,7 +28,8 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
     zeros = np.zeros(P.free.size)
     for t in range(T):
         q = Q[t]
-        energy[t] = assemble(q, P, general_law, linear, balls, pressure[t], a_el[t], zeros, q, zeros, GRADIENT)[0]
+        energy[t] = assemble(q, P, general_law, linear, balls, None, pressure[t], a_el[t], zeros, q, zeros,
+                             GRADIENT)[0]
         v = 0.0
         for e in range(P.edges.shape[0]):
             a, b = P.edges[e, 0], P.edges[e, 1]

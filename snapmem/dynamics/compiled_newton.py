@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import TANGENT, admissible, assemble, max_step, state_ok
+from snapmem.dynamics.compiled_assembly import TANGENT, admissible, assemble, law_with_networks, max_step, state_ok
+from snapmem.kernels.assembly import edge_stretches
 from snapmem.kernels.bordered import band_solve, bordered_solve
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
 from snapmem.solvers.rules import (CUT, converged, converged_at_end, energy_step_accepted, inertia_tolerance, max_norm,
@@ -35,14 +36,15 @@ OUTCOMES = (
 
 
 @njit(cache=True, nogil=True)
-def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, linear, balls, pressure, a_el, tol, size,
-              max_iterations, max_cuts):
+def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, linear, balls, viscous, pressure, a_el, tol,
+              size, max_iterations, max_cuts):
     """One time step: its inertia M / h^2 + C / h, momentum M v / h and guess anchor + h v (on the
     free degrees of freedom; ``mass``, ``damping`` there), the tolerance kept above the inertia
     term's rounding floor (:func:`snapmem.solvers.rules.inertia_tolerance`), then damped Newton on
     the step's incremental potential: snapmem.solvers.newton.newton with merit='energy' (which
-    documents every rule here). ``general_law``, ``linear``, ``balls``: those terms or None (see
-    :mod:`snapmem.dynamics.compiled_assembly`). Returns (y, code, iterations, cuts, norm), code one
+    documents every rule here). ``general_law``, ``linear``, ``balls``, ``viscous``: those terms or None
+    (see :mod:`snapmem.dynamics.compiled_assembly`; the networks' zeta*(y) is left in
+    ``viscous.zeta_warm``). Returns (y, code, iterations, cuts, norm), code one
     of this module's (an index into OUTCOMES, or HANDED_BACK).
 
     One kernel, not a set-up calling a Newton kernel: numba optimises a kernel together with all
@@ -68,13 +70,14 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
         q = fallback.copy()
         if not admissible(q, P, general_law, linear, balls):
             return q, START_OUTSIDE, 0, 0, np.nan
-    energy, residual, lower, border, corner, floor = assemble(q, P, general_law, linear, balls, pressure, a_el,
-                                                              inertia, anchor, momentum, TANGENT)
+    energy, residual, lower, border, corner, floor = assemble(q, P, general_law, linear, balls, viscous, pressure,
+                                                              a_el, inertia, anchor, momentum, TANGENT)
     norm = max_norm(residual)
     last_step = np.inf
     iterations = cuts = 0
     code = MAX_ITERATIONS
     dq = np.zeros(q.size)
+    last_at_q = True                            # whether the last assembly was at q (the networks' zeta* is q's)
     for _ in range(max_iterations):
         if converged(norm, tol, floor, last_step, q):
             code = CONVERGED
@@ -100,8 +103,9 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
             trial = q + alpha * dq
             inside = state_ok(trial, P, general_law)   # the contacts' gaps: the barriers' energy is inf at a gap <= 0
             if inside:
-                e_t, r_t, lo_t, bo_t, co_t, fl_t = assemble(trial, P, general_law, linear, balls, pressure, a_el,
-                                                            inertia, anchor, momentum, TANGENT)
+                e_t, r_t, lo_t, bo_t, co_t, fl_t = assemble(trial, P, general_law, linear, balls, viscous, pressure,
+                                                            a_el, inertia, anchor, momentum, TANGENT)
+                last_at_q = False
                 inside = e_t < np.inf
                 n_t = max_norm(r_t)
                 if energy_step_accepted(e_t, n_t, energy, norm, alpha, slope):
@@ -114,7 +118,11 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
             break
         q, energy, residual, lower, border, corner, floor = trial, e_t, r_t, lo_t, bo_t, co_t, fl_t
         norm = n_t
+        last_at_q = True
         last_step = step_length(alpha, dx)
     if code != CONVERGED and converged_at_end(norm, tol, floor):
         code = CONVERGED
+    if viscous is not None and not last_at_q:      # the last assembly was a rejected trial: zeta* at q again
+        lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
+        law_with_networks(lam1, lam2, P, general_law, viscous)
     return q, code, iterations, cuts, norm

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, assemble,
+from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, Viscous, assemble,
                                                 contact_gaps)
 from snapmem.dynamics.compiled_measures import frames_measures
 from snapmem.dynamics.compiled_newton import HANDED_BACK, OUTCOMES, CONVERGED, time_step
@@ -37,7 +37,7 @@ from snapmem.kernels.laws import LAW_LINEAR
 from snapmem.kernels.switch import compiled
 from snapmem.model.contact import contact_names
 from snapmem.model.terms import (BallDeclaration, ElectricDeclaration, LawDeclaration, LinearContactDeclaration,
-                                 PressureDeclaration)
+                                 PressureDeclaration, ViscousDeclaration)
 from snapmem.solvers.newton import NewtonReport
 
 
@@ -52,8 +52,15 @@ class CompiledStep:
     :meth:`solve` takes the place of ``newton(assemble, guess, ...)`` in the stepper.
     """
 
-    def __init__(self, scene, plan: Plan, terms: tuple, electric: tuple, pressure: bool, contact_slots: list):
+    def __init__(self, scene, plan: Plan, terms: tuple, electric: tuple, pressure: bool, contact_slots: list,
+                 viscous=None):
         self.scene, self.plan = scene, plan
+        # the viscous networks' term (snapmem.model.viscous) and the kernels' arrays of it, or None
+        self._viscous_term = viscous
+        self.viscous = None if viscous is None else Viscous(
+            visc_mu=np.array(viscous.moduli, dtype=float), visc_jlim=np.array(viscous.jlims, dtype=float),
+            visc_c=np.zeros(viscous.networks), zeta_hat=np.zeros((viscous.networks, 2, plan.edges.shape[0])),
+            zeta_warm=np.zeros((viscous.networks, 2, plan.edges.shape[0])))
         # (general_law, linear, balls): those terms, None for a kind the scene has not, so that the
         # kernels compile only the terms the scene has (compiled_assembly)
         self.terms = terms
@@ -68,14 +75,14 @@ class CompiledStep:
         (or on the reference path)."""
         if not compiled():
             return None
-        found = {LawDeclaration: [], ElectricDeclaration: [], PressureDeclaration: []}
+        found = {LawDeclaration: [], ElectricDeclaration: [], PressureDeclaration: [], ViscousDeclaration: []}
         for term in scene.density_terms + scene.edge_terms:
             declared = term.compiled(scene)
             if type(declared) not in found:
                 return None
             found[type(declared)].append(declared)
-        law, electric, pressure = found.values()
-        if len(law) != 1 or len(pressure) > 1:
+        law, electric, pressure, viscous = found.values()
+        if len(law) != 1 or len(pressure) > 1 or len(viscous) > 1:
             return None
         linear, balls, slots = [], [], []
         for term, bodies in zip(scene.node_terms, scene.dofs.body_slices):
@@ -90,7 +97,8 @@ class CompiledStep:
                 return None
         plan, terms = _plan(scene, law[0], linear, balls)
         slots = [len(linear) + i if ball else i for ball, i in slots]      # every node term is a contact here
-        return cls(scene, plan, terms, tuple(d.coefficient for d in electric), bool(pressure), slots)
+        return cls(scene, plan, terms, tuple(d.coefficient for d in electric), bool(pressure), slots,
+                   viscous[0].term if viscous else None)
 
     def _loads(self, loads) -> tuple:
         pressure = float(loads["pressure"]) if self._pressure else 0.0
@@ -105,13 +113,38 @@ class CompiledStep:
         inertia = np.zeros(n_free) if inertia is None else inertia
         anchor = q if anchor is None else anchor
         momentum = np.zeros(n_free) if momentum is None else momentum
-        return assemble(q, self.plan, *self.terms, *self._loads(loads), inertia, anchor, momentum, TANGENT)
+        return assemble(q, self.plan, *self.terms, self._open_networks(), *self._loads(loads), inertia, anchor,
+                        momentum, TANGENT)
 
-    def measures_many(self, Q, loads: list) -> tuple:
+    def _open_networks(self):
+        """The viscous networks' arrays for the term's present state (None without networks): in an
+        open step its c = eta / h and anchor zeta_hat (the local solves start there); outside a
+        step the internal stretches held at their state (limit 'instantaneous') or no networks
+        (moduli 0: 'relaxed')."""
+        v, term = self.viscous, self._viscous_term
+        if v is None:
+            return None
+        step = term.open_step
+        edges = self.plan.edges.shape[0]
+        if step is None:
+            v.visc_c[:] = 0.0
+            v.zeta_hat[:] = term.state(edges)
+            v.visc_mu[:] = 0.0 if term.limit == "relaxed" else term.moduli
+        else:
+            h, zeta_hat = step
+            v.visc_c[:] = term.viscosities / h
+            v.zeta_hat[:] = zeta_hat
+            v.visc_mu[:] = term.moduli
+        v.zeta_warm[:] = v.zeta_hat
+        return v
+
+    def measures_many(self, Q, loads: list, xi=None) -> tuple:
         """Potential energy [J], volume [m^3] and smallest contact gap [m] of every state (rows of Q,
         each with its loads), each (T,), and the contact report's columns ``<name>_force`` [N] and
         ``<name>_gap`` [m]: what ``Scene.energy``, ``Scene.volume``, :meth:`min_gap` and
-        :func:`snapmem.model.contact.contact_report` give, in one compiled call."""
+        :func:`snapmem.model.contact.contact_report` give, in one compiled call. With viscous
+        networks, ``xi`` (T, K, 2, E) are the frames' internal stretches: their stored energy joins
+        the potential."""
         coefficients = np.array([self._loads(each) for each in loads], dtype=float).reshape(-1, 2)   # (pressure, a_el)
         energy, volume, forces, gaps = frames_measures(np.ascontiguousarray(Q, dtype=float), self.plan, *self.terms,
                                                        coefficients[:, 0].copy(), coefficients[:, 1].copy())
@@ -120,6 +153,11 @@ class CompiledStep:
             columns[f"{name}_force"] = forces[:, i]
             columns[f"{name}_gap"] = gaps[:, i]
         smallest = gaps.min(axis=1) if gaps.shape[1] else np.full(len(Q), np.inf)
+        term = self._viscous_term
+        if term is not None and xi is not None:
+            weight = self.scene.weight
+            energy = energy + np.array([term.stored_energy(self.scene.kinematics(q), np.log(x), weight)
+                                        for q, x in zip(Q, xi)])
         return energy, volume, smallest, columns
 
     def min_gap(self, q) -> float:
@@ -134,11 +172,14 @@ class CompiledStep:
         state, if the guess is outside the domain). (y, NewtonReport), or None to hand the step
         back to the general path."""
         pressure, a_el = self._loads(loads)
+        networks = self._open_networks()
         y, code, iterations, cuts, norm = time_step(
-            anchor, velocity, h, mass, damping, fallback, self.plan, *self.terms, pressure, a_el, tol, size,
-            options.max_iterations, options.max_cuts)
+            anchor, velocity, h, mass, damping, fallback, self.plan, *self.terms, networks, pressure, a_el, tol,
+            size, options.max_iterations, options.max_cuts)
         if code == HANDED_BACK:
             return None
+        if networks is not None and self._viscous_term.open_step is not None:   # zeta*(y): the driver's close reads it
+            self._viscous_term.hand_over(y, networks.zeta_warm.copy())
         status, reason = OUTCOMES[code]
         return y, NewtonReport(code == CONVERGED, int(iterations), float(norm), reason, int(cuts), status=status)
 
@@ -151,6 +192,7 @@ def _plan(scene, law: LawDeclaration, linear: list, balls: list) -> tuple:
     plan = Plan(
         edges=_ints(m.edges), inv_length=m.inverse_length, inv_mid_radius=m.inverse_mid_radius, weight=scene.weight,
         law_kind=law.kind, law_params=np.array(law.params, dtype=float),
+        law_stretch=np.array(law.prestretch, dtype=float),
         hess_index=_ints(dofs.hess_index), band_size=int(dofs.band_size), n_band=int(dofs.n_band),
         bandwidth=int(dofs.bandwidth), free=_ints(dofs.free), radius_dofs=_ints(dofs.radius_dofs),
         n_node_dofs=int(dofs.n_node_dofs), n_bodies=int(dofs.n_bodies),

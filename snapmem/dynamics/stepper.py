@@ -117,9 +117,8 @@ class _InternalState:
             return
         pending = []
         if y is not None:
-            kin = self.scene.kinematics(y)
             for term, anchor in zip(self.terms, self._anchors):
-                star = term.internal(kin)
+                star = term.internal_at(y, self.scene)        # the compiled solve's own, if it took the step
                 new = anchor.new_state(star.ravel())[0].reshape(star.shape)
                 pending.append((new, term.step_dissipation(star, dt, self.scene.weight)))
         for term in self.terms:
@@ -199,7 +198,8 @@ class _Recorder:
     def _measures(self, Q, loads):
         """Potential energy, volume, smallest gap (T,) and contact report columns of the frames Q."""
         if self.compiled is not None:
-            return self.compiled.measures_many(Q, loads)
+            viscous = self.internal is not None and self.internal.terms
+            return self.compiled.measures_many(Q, loads, [row["xi"] for row in self.rows] if viscous else None)
         scene = self.scene
         reports = [contact_report(scene, q) for q in Q]
         columns = {k: np.array([r[k] for r in reports]) for k in (reports[0] if reports else {})}

@@ -46,6 +46,13 @@ def electric_density(l1, l2, a):
 
 
 @njit(cache=True, nogil=True)
+def prestretch_chain(w, w1, w2, w11, w12, w22, lp1, lp2):
+    """A density of the total stretches Lam_i = lp_i lam_i as one of the mounted stretches lam_i
+    (snapmem.model.prestretch): the first derivatives times lp_i, the second times lp_i lp_j."""
+    return w, lp1 * w1, lp2 * w2, lp1 * lp1 * w11, lp1 * lp2 * w12, lp2 * lp2 * w22
+
+
+@njit(cache=True, nogil=True)
 def law_density(lam1, lam2, kind, params):
     """The law's (w, w1, w2, w11, w12, w22), each (E,), for a law of ``kind`` with ``params``."""
     if kind == LAW_LINEAR:

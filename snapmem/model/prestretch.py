@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from snapmem.errors import SnapmemError
+from snapmem.kernels.laws import prestretch_chain
 from snapmem.model.materials import Density, Law
 
 
@@ -65,7 +66,7 @@ class Prestretched(Law):
     def density(self, lam1, lam2) -> Density:
         lp1, lp2 = self.lp1, self.lp2
         d = self.law.density(lp1 * lam1, lp2 * lam2)
-        return Density(d.w, lp1 * d.w1, lp2 * d.w2, lp1 * lp1 * d.w11, lp1 * lp2 * d.w12, lp2 * lp2 * d.w22)
+        return Density(*prestretch_chain.py_func(d.w, d.w1, d.w2, d.w11, d.w12, d.w22, lp1, lp2))
 
     def admissible(self, lam1, lam2):
         return self.law.admissible(self.lp1 * lam1, self.lp2 * lam2)

@@ -27,15 +27,25 @@ from snapmem.kernels.assembly import swept_volume
 from snapmem.kernels.laws import LAW_GENT, LAW_LINEAR, electric_density
 from snapmem.model.kinematics import EdgeKinematics
 from snapmem.model.materials import Density, Gent, InvariantLaw, Law
+from snapmem.model.prestretch import Prestretched
 
 
 # ----------------------------------------------------------------------------------------------
 # declarations: what the compiled time step needs of a term
 class LawDeclaration(NamedTuple):
-    """A stretching law the kernel evaluates: its kind (snapmem.kernels.laws.LAW_*) and parameters."""
+    """A stretching law the kernel evaluates: its kind (snapmem.kernels.laws.LAW_*) and parameters,
+    at the total stretch of the mounting's prestretches (meridional, hoop; 1, 1 stress-free)."""
 
     kind: int
     params: tuple
+    prestretch: tuple = (1.0, 1.0)
+
+
+class ViscousDeclaration(NamedTuple):
+    """Viscous networks (snapmem.model.viscous.ViscousNetworks): the term itself, whose moduli, Gent
+    locks and viscosities the kernel takes, and whose open step (h, zeta_hat) each solve reads."""
+
+    term: object
 
 
 class ElectricDeclaration(NamedTuple):
@@ -141,8 +151,12 @@ class Stretching(DensityTerm):
 
     def compiled(self, scene):
         """The law's kind: any law linear in the invariants (its constant dW/dI1, dW/dI2), or one
-        of :data:`COMPILED_LAWS`; None for another law (Yeoh)."""
+        of :data:`COMPILED_LAWS`, possibly mounted prestretched (its prestretches); None for another
+        law (Yeoh)."""
         law = self.law
+        if isinstance(law, Prestretched):
+            inner = Stretching(law.law).compiled(scene)
+            return None if inner is None else inner._replace(prestretch=(float(law.lp1), float(law.lp2)))
         if isinstance(law, InvariantLaw) and law.linear:
             return LawDeclaration(LAW_LINEAR, tuple(float(x) for x in law.invariant_derivatives(3.0, 3.0)[1:3]))
         declare = COMPILED_LAWS.get(type(law))

@@ -36,9 +36,10 @@ from __future__ import annotations
 import numpy as np
 
 from snapmem.errors import SnapmemError, check_real
+from snapmem.kernels import viscous as _kernel
 from snapmem.model.kinematics import EdgeKinematics
 from snapmem.model.materials import Density
-from snapmem.model.terms import DensityTerm
+from snapmem.model.terms import DensityTerm, ViscousDeclaration
 
 #: The static limits of a viscoelastic law.
 VISCOUS_LIMITS = ("relaxed", "instantaneous")
@@ -46,25 +47,16 @@ VISCOUS_LIMITS = ("relaxed", "instantaneous")
 #: The flow rule's metric (the small-strain stiffness of a neo-Hookean network in log strains / mu).
 FLOW_METRIC = np.array([[4.0, 2.0], [2.0, 4.0]])
 
-_LOCAL_TOL = 1e-14          # local Newton: |d zeta| below this (log strain) ends it
-_LOCAL_MAX_ITERATIONS = 50
 
 
-def network_log_derivatives(e1, e2, mu):
-    """W_k and its first and second derivatives in the elastic log strains (e1, e2).
-
-    W = (mu/2)(exp(2 e1) + exp(2 e2) + exp(-2 e1 - 2 e2) - 3) [Pa]; returns
-    (W, f1, f2, f11, f12, f22), arrays of the broadcast shape of the inputs.
-    """
-    x1, x2, x3 = np.exp(2.0 * e1), np.exp(2.0 * e2), np.exp(-2.0 * (e1 + e2))
-    w = 0.5 * mu * (x1 + x2 + x3 - 3.0)
-    f1, f2 = mu * (x1 - x3), mu * (x2 - x3)
-    f11, f22, f12 = 2.0 * mu * (x1 + x3), 2.0 * mu * (x2 + x3), 2.0 * mu * x3
-    return w, f1, f2, f11, f12, f22
+def network_log_derivatives(e1, e2, mu, jlim=np.inf):
+    """W_k and its first and second derivatives in the elastic log strains (e1, e2): (W, f1, f2,
+    f11, f12, f22) [Pa], neo-Hookean (``jlim`` inf) or Gent (snapmem.kernels.viscous)."""
+    return _kernel.network_log_derivatives.py_func(e1, e2, mu, jlim)
 
 
 class ViscousNetworks(DensityTerm):
-    """Non-equilibrium neo-Hookean networks with their internal stretches, one pair per edge and network.
+    """Non-equilibrium networks (neo-Hookean or Gent) with their internal stretches, one pair per edge and network.
 
     The term is stateful: ``zeta`` (K, 2, E) holds the committed log internal stretches ln xi of
     the networks (meridional, hoop) on every edge, zero (xi = 1) for a fresh membrane. The time
@@ -80,9 +72,11 @@ class ViscousNetworks(DensityTerm):
         Relaxation times tau_k [s], > 0, one per modulus.
     limit : {'relaxed', 'instantaneous'}
         What the term is outside a time step (statics).
+    jlims : sequence of float, optional
+        Gent locks Jlim_k of the networks (> 0; inf, the default, is neo-Hookean), one per modulus.
     """
 
-    def __init__(self, moduli, times, limit: str = "relaxed"):
+    def __init__(self, moduli, times, limit: str = "relaxed", jlims=None):
         moduli = [moduli] if np.ndim(moduli) == 0 else list(moduli)
         times = [times] if np.ndim(times) == 0 else list(times)
         if len(moduli) != len(times) or not moduli:
@@ -92,6 +86,13 @@ class ViscousNetworks(DensityTerm):
                                 for i, m in enumerate(moduli)])
         self.times = np.array([check_real(f"relaxation_time[{i}]", t, minimum=0.0, min_inclusive=False)
                                for i, t in enumerate(times)])
+        jlims = [np.inf] * len(moduli) if jlims is None else ([jlims] if np.ndim(jlims) == 0 else list(jlims))
+        if len(jlims) != len(moduli):
+            raise SnapmemError(f"viscous_Jlim = {jlims!r}: give one Gent lock per network modulus "
+                               f"({len(moduli)} values; inf is neo-Hookean)")
+        self.jlims = np.array([np.inf if j == np.inf else check_real(f"viscous_Jlim[{i}]", j, minimum=0.0,
+                                                                     min_inclusive=False)
+                               for i, j in enumerate(jlims)])
         if limit not in VISCOUS_LIMITS:
             raise SnapmemError(f"viscous_limit = {limit!r}: must be one of {', '.join(VISCOUS_LIMITS)}")
         self.limit = limit
@@ -99,6 +100,7 @@ class ViscousNetworks(DensityTerm):
         self.zeta: np.ndarray | None = None                  # (K, 2, E), set on first use
         self._step: tuple[float, np.ndarray] | None = None    # (h, zeta_hat) inside a time step
         self._warm: np.ndarray | None = None                  # the last local solution (a Newton start)
+        self._solved: tuple | None = None                     # (y, zeta*(y)) handed over by the compiled step
 
     @property
     def networks(self) -> int:
@@ -115,15 +117,25 @@ class ViscousNetworks(DensityTerm):
     def reset(self, zeta: np.ndarray | None = None) -> None:
         """Forget the history: internal stretches back to 1 (or to exp(``zeta``))."""
         self.zeta = None if zeta is None else np.array(zeta, dtype=float)
-        self._step = self._warm = None
+        self._step = self._warm = self._solved = None
 
     def begin_step(self, h: float, zeta_hat: np.ndarray) -> None:
         """Open a time step: the incremental potential of step h [s] anchored at zeta_hat (K, 2, E)."""
         self._step = (float(h), np.asarray(zeta_hat, dtype=float))
-        self._warm = None
+        self._warm = self._solved = None
 
     def end_step(self) -> None:
-        self._step = self._warm = None
+        self._step = self._warm = self._solved = None
+
+    @property
+    def open_step(self) -> tuple[float, np.ndarray] | None:
+        """(h [s], zeta_hat (K, 2, E)) of the open time step, or None outside a step."""
+        return self._step
+
+    def hand_over(self, y: np.ndarray, zeta: np.ndarray) -> None:
+        """The step's solve (the compiled one) ended at y with the internal stretches ``zeta`` (K, 2,
+        E) = zeta*(y): :meth:`internal_at` ``y`` returns them without solving again."""
+        self._solved = (y, zeta)
 
     def commit(self, zeta: np.ndarray) -> None:
         """Take ``zeta`` (K, 2, E) as the new state (after an accepted step)."""
@@ -131,34 +143,34 @@ class ViscousNetworks(DensityTerm):
 
     # ------------------------------------------------------------------------------------------
     # the local problem
+    def _coefficients(self, h: float) -> np.ndarray:
+        """c_k = eta_k / h [Pa] of a step of length h."""
+        return self.viscosities / h
+
     def internal(self, kin: EdgeKinematics) -> np.ndarray:
         """zeta*(lam) (K, 2, E) of the open step: the minimiser of the incremental potential."""
         if self._step is None:
             raise SnapmemError("ViscousNetworks.internal: no time step is open (begin_step first)")
         h, zeta_hat = self._step
-        eps = np.log(np.stack([kin.lam1, kin.lam2]))            # (2, E)
-        mu = self.moduli[:, None, None]
-        c = (self.viscosities / h)[:, None]                        # eta_k / h, (K, 1)
-        zeta = (self._warm if self._warm is not None and self._warm.shape == zeta_hat.shape else zeta_hat).copy()
-        for _ in range(_LOCAL_MAX_ITERATIONS):
-            e = eps[None] - zeta
-            _, f1, f2, f11, f12, f22 = network_log_derivatives(e[:, 0], e[:, 1], mu[:, 0])
-            d = zeta - zeta_hat
-            g1 = -f1 + c * (4.0 * d[:, 0] + 2.0 * d[:, 1])
-            g2 = -f2 + c * (2.0 * d[:, 0] + 4.0 * d[:, 1])
-            k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
-            det = k11 * k22 - k12 * k12
-            step1 = (k22 * g1 - k12 * g2) / det
-            step2 = (k11 * g2 - k12 * g1) / det
-            zeta[:, 0] -= step1
-            zeta[:, 1] -= step2
-            if max(np.abs(step1).max(), np.abs(step2).max()) < _LOCAL_TOL:
-                break
-        else:
-            raise SnapmemError("viscous networks: the local flow-rule solve did not converge "
-                               f"in {_LOCAL_MAX_ITERATIONS} iterations (stretches out of range?)")
+        eps1, eps2 = np.log(kin.lam1), np.log(kin.lam2)
+        start = self._warm if self._warm is not None and self._warm.shape == zeta_hat.shape else zeta_hat
+        zeta = np.empty_like(zeta_hat)
+        for k, c in enumerate(self._coefficients(h)):
+            z1, z2, ok = _kernel.network_internal.py_func(eps1, eps2, start[k, 0], start[k, 1], zeta_hat[k, 0],
+                                                          zeta_hat[k, 1], self.moduli[k], self.jlims[k], c)
+            if not ok:
+                raise SnapmemError("viscous networks: the local flow-rule solve did not converge in "
+                                   f"{_kernel.LOCAL_MAX_ITERATIONS} iterations (stretches out of range?)")
+            zeta[k, 0], zeta[k, 1] = z1, z2
         self._warm = zeta
         return zeta
+
+    def internal_at(self, y: np.ndarray, scene) -> np.ndarray:
+        """zeta*(y) of the open step at the state y of ``scene``: the compiled solve's hand-over
+        (:meth:`hand_over`) if it ended at this very y, else :meth:`internal`."""
+        if self._solved is not None and self._solved[0] is y:
+            return self._solved[1]
+        return self.internal(scene.kinematics(y))
 
     def step_dissipation(self, zeta_new_mid: np.ndarray, dt: float, weight: np.ndarray) -> float:
         """Energy dissipated by the dashpots over a step of length dt [s] [J].
@@ -170,6 +182,13 @@ class ViscousNetworks(DensityTerm):
         quad = 4.0 * r[:, 0] ** 2 + 4.0 * r[:, 0] * r[:, 1] + 4.0 * r[:, 1] ** 2
         return float(dt * np.sum(self.viscosities[:, None] * quad * weight[None]))
 
+    def stored_energy(self, kin: EdgeKinematics, zeta: np.ndarray, weight: np.ndarray) -> float:
+        """The networks' elastic energy [J] at the stretches ``kin`` with the internal log stretches
+        ``zeta`` (K, 2, E) held, weighted by the edges' reference volumes ``weight`` (E,) [m^3]."""
+        eps1, eps2 = np.log(kin.lam1), np.log(kin.lam2)
+        return float(sum(weight @ network_log_derivatives(eps1 - zeta[k, 0], eps2 - zeta[k, 1], self.moduli[k],
+                                                          self.jlims[k])[0] for k in range(self.networks)))
+
     # ------------------------------------------------------------------------------------------
     # the density
     def density(self, kin, loads) -> Density:
@@ -177,36 +196,24 @@ class ViscousNetworks(DensityTerm):
         zero = 0.0 * kin.lam1
         if self._step is None and self.limit == "relaxed":
             return Density(zero, zero, zero, zero, zero, zero)
-        lam = np.stack([kin.lam1, kin.lam2])
-        eps = np.log(lam)
-        zeta = self.state(kin.lam1.size) if self._step is None else self.internal(kin)
-        e = eps[None] - zeta
-        mu = self.moduli[:, None]
-        w, f1, f2, f11, f12, f22 = network_log_derivatives(e[:, 0], e[:, 1], mu)
-        if self._step is not None:                     # condense: f_ee - f_ee (f_ee + c A)^-1 f_ee
-            h, zeta_hat = self._step
-            c = (self.viscosities / h)[:, None]
-            d = zeta - zeta_hat
-            w = w + 0.5 * c * (4.0 * d[:, 0] ** 2 + 4.0 * d[:, 0] * d[:, 1] + 4.0 * d[:, 1] ** 2)
-            k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
-            det = k11 * k22 - k12 * k12
-            i11, i12, i22 = k22 / det, -k12 / det, k11 / det
-            # F K^-1 F with F = [[f11, f12], [f12, f22]] symmetric
-            a11, a12 = f11 * i11 + f12 * i12, f11 * i12 + f12 * i22
-            a21, a22 = f12 * i11 + f22 * i12, f12 * i12 + f22 * i22
-            s11 = a11 * f11 + a12 * f12
-            s12 = a11 * f12 + a12 * f22
-            s22 = a21 * f12 + a22 * f22
-            f11, f12, f22 = f11 - s11, f12 - s12, f22 - s22
-        # sum the networks, then log strains -> stretches: w_i = f_i / lam_i,
-        # w_ij = (f_ij - delta_ij f_i) / (lam_i lam_j)
-        w, f1, f2, f11, f12, f22 = (x.sum(axis=0) for x in (w, f1, f2, f11, f12, f22))
-        l1, l2 = kin.lam1, kin.lam2
-        return Density(w, f1 / l1, f2 / l2, (f11 - f1) / (l1 * l1), f12 / (l1 * l2), (f22 - f2) / (l2 * l2))
+        eps1, eps2 = np.log(kin.lam1), np.log(kin.lam2)
+        if self._step is None:
+            zeta, zeta_hat, coefficients = self.state(kin.lam1.size), None, np.zeros(self.networks)
+        else:
+            zeta, (h, zeta_hat) = self.internal(kin), self._step
+            coefficients = self._coefficients(h)
+        total = [0.0 * zero for _ in range(6)]
+        for k, c in enumerate(coefficients):
+            hat = zeta[k] if zeta_hat is None else zeta_hat[k]
+            parts = _kernel.network_condensed.py_func(eps1, eps2, zeta[k, 0], zeta[k, 1], hat[0], hat[1],
+                                                      self.moduli[k], self.jlims[k], c)
+            total = [t + x for t, x in zip(total, parts)]
+        # the networks summed, then log strains -> stretches
+        return Density(*_kernel.log_to_stretch.py_func(kin.lam1, kin.lam2, *total))
 
     def compiled(self, scene):
-        """None: the compiled time step does not cover the viscous networks (the general path runs)."""
-        return None
+        """The networks' declaration for the compiled time step (which reads the open step from the term)."""
+        return ViscousDeclaration(self)
 
 
 def viscous_terms(scene) -> list:

@@ -1,0 +1,103 @@
+"""The viscous networks' formulas (snapmem.model.viscous documents the model), each written once as a
+compiled function on arrays: the numpy term calls the Python original (``.py_func``), the compiled
+time step (snapmem.dynamics.compiled_assembly) the compiled one.
+
+A network k has the energy W_k(a1, a2) of its elastic stretches a_i = lam_i / xi_ki, neo-Hookean
+(``jlim`` = inf) or Gent with the lock ``jlim``, written in the elastic log strains e_i = eps_i -
+zeta_i (eps_i = ln lam_i, zeta_i = ln xi_i). In a time step of length h from the anchor zeta_hat
+its incremental potential is W_k(e) + (c / 2)(zeta - zeta_hat)^T A (zeta - zeta_hat), c = eta_k / h,
+A = [[4, 2], [2, 4]]; :func:`network_internal` minimises it in zeta (the implicit flow rule) and
+:func:`network_condensed` gives the condensed density and its derivatives in the log strains.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from snapmem._lazy import njit
+
+#: The local Newton ends when every |d zeta| is below this (log strain) ...
+LOCAL_TOL = 1e-14
+#: ... or fails after this many iterations.
+LOCAL_MAX_ITERATIONS = 50
+
+
+@njit(cache=True, nogil=True)
+def network_log_derivatives(e1, e2, mu, jlim):
+    """W of a network and its derivatives in the elastic log strains (e1, e2): (W, f1, f2, f11, f12, f22) [Pa].
+
+    Neo-Hookean for ``jlim`` = inf, W = (mu/2)(I1 - 3); Gent otherwise, W = -(mu jlim / 2) ln(1 -
+    (I1 - 3) / jlim); I1 = exp(2 e1) + exp(2 e2) + exp(-2 e1 - 2 e2). Arrays or numbers.
+    """
+    x1, x2, x3 = np.exp(2.0 * e1), np.exp(2.0 * e2), np.exp(-2.0 * (e1 + e2))
+    if jlim == np.inf:
+        w = 0.5 * mu * (x1 + x2 + x3 - 3.0)
+        f1, f2 = mu * (x1 - x3), mu * (x2 - x3)
+        f11, f22, f12 = 2.0 * mu * (x1 + x3), 2.0 * mu * (x2 + x3), 2.0 * mu * x3
+        return w, f1, f2, f11, f12, f22
+    s = 1.0 - (x1 + x2 + x3 - 3.0) / jlim           # > 0 short of the lock
+    W1 = 0.5 * mu / s                                # dW/dI1
+    W11 = W1 / (s * jlim)                            # d2W/dI1^2
+    i1, i2 = 2.0 * (x1 - x3), 2.0 * (x2 - x3)        # dI1/de
+    i11, i22, i12 = 4.0 * (x1 + x3), 4.0 * (x2 + x3), 4.0 * x3
+    w = -0.5 * mu * jlim * np.log(s)
+    return (w, W1 * i1, W1 * i2, W11 * i1 * i1 + W1 * i11, W11 * i1 * i2 + W1 * i12,
+            W11 * i2 * i2 + W1 * i22)
+
+
+@njit(cache=True, nogil=True)
+def network_internal(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
+    """The implicit flow rule of one network on every edge: Newton on the step's incremental
+    potential in zeta from (zeta1, zeta2) (convex: its Hessian f_ee + c A is positive definite).
+
+    eps1, eps2, zeta1, zeta2, zhat1, zhat2 : (E,) the log stretches, the start, the anchor; mu,
+    jlim the network's modulus [Pa] and lock; c = eta / h [Pa]. Returns (zeta1, zeta2, converged).
+    """
+    z1, z2 = zeta1.copy(), zeta2.copy()
+    for _ in range(LOCAL_MAX_ITERATIONS):
+        _, f1, f2, f11, f12, f22 = network_log_derivatives(eps1 - z1, eps2 - z2, mu, jlim)
+        d1, d2 = z1 - zhat1, z2 - zhat2
+        g1 = -f1 + c * (4.0 * d1 + 2.0 * d2)
+        g2 = -f2 + c * (2.0 * d1 + 4.0 * d2)
+        k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
+        det = k11 * k22 - k12 * k12
+        step1 = (k22 * g1 - k12 * g2) / det
+        step2 = (k11 * g2 - k12 * g1) / det
+        z1 = z1 - step1
+        z2 = z2 - step2
+        if max(np.max(np.abs(step1)), np.max(np.abs(step2))) < LOCAL_TOL:
+            return z1, z2, True
+    return z1, z2, False
+
+
+@njit(cache=True, nogil=True)
+def network_condensed(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
+    """One network's density in the log strains eps at its internal log stretches zeta: (w, f1, f2,
+    f11, f12, f22) [Pa].
+
+    c > 0 (in a step, zeta the minimiser of :func:`network_internal`): the condensed incremental
+    potential, w + (c/2) d^T A d with d = zeta - zeta_hat, gradient f_e (envelope theorem) and
+    Hessian f_ee - f_ee (f_ee + c A)^-1 f_ee. c = 0: the network with zeta held (no condensation).
+    """
+    w, f1, f2, f11, f12, f22 = network_log_derivatives(eps1 - zeta1, eps2 - zeta2, mu, jlim)
+    if c == 0.0:
+        return w, f1, f2, f11, f12, f22
+    d1, d2 = zeta1 - zhat1, zeta2 - zhat2
+    w = w + 0.5 * c * (4.0 * d1 * d1 + 4.0 * d1 * d2 + 4.0 * d2 * d2)
+    k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
+    det = k11 * k22 - k12 * k12
+    i11, i12, i22 = k22 / det, -k12 / det, k11 / det
+    # F K^-1 F with F = [[f11, f12], [f12, f22]] symmetric
+    a11, a12 = f11 * i11 + f12 * i12, f11 * i12 + f12 * i22
+    a21, a22 = f12 * i11 + f22 * i12, f12 * i12 + f22 * i22
+    s11 = a11 * f11 + a12 * f12
+    s12 = a11 * f12 + a12 * f22
+    s22 = a21 * f12 + a22 * f22
+    return w, f1, f2, f11 - s11, f12 - s12, f22 - s22
+
+
+@njit(cache=True, nogil=True)
+def log_to_stretch(lam1, lam2, w, f1, f2, f11, f12, f22):
+    """A density's derivatives in the log strains as derivatives in the stretches: w_i = f_i / lam_i,
+    w_ij = (f_ij - delta_ij f_i) / (lam_i lam_j). Returns (w, w1, w2, w11, w12, w22)."""
+    return (w, f1 / lam1, f2 / lam2, (f11 - f1) / (lam1 * lam1), f12 / (lam1 * lam2),
+            (f22 - f2) / (lam2 * lam2))
