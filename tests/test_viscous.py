@@ -22,7 +22,7 @@ from snapmem.catalog.registry import build_scene
 from snapmem.dynamics.driver import simulate
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.errors import SnapmemError
-from snapmem.model.viscous import ViscousNetworks, network_log_derivatives
+from snapmem.model.viscous import ViscousNetworks, network_log_derivatives, viscous_terms
 from snapmem.reference.exact import balloon_limit_point, balloon_stretch
 from snapmem.statics import equilibrium
 
@@ -33,13 +33,16 @@ NODES = 21
 MESH_ERROR = 3e-3                             # |lam - lam_exact| of the 21-node balloon at these stretches
 
 
-def balloon_creep(t_end, pressure, kink=RAMP, c1=C1, c2=C2, mu_v=MU_V, tau=TAU, rho=RHO, damping=DAMPING):
+def balloon_creep(t_end, pressure, kink=RAMP, c1=C1, c2=C2, mu_v=MU_V, tau=TAU, rho=RHO, damping=DAMPING,
+                  jlim=np.inf):
     """The homogeneous viscoelastic balloon's ODEs (module docstring) by scipy (Radau, tight
-    tolerances, restarted at the load's kink): t -> (lam, lam', zeta)."""
+    tolerances, restarted at the load's kink): t -> (lam, lam', zeta). A Gent network (``jlim``
+    finite) has dW/dI1 = (mu_v / 2) / s, s = 1 - (I1(a) - 3) / jlim, I1 = 2 a^2 + a^-4: its stress
+    and its flow are the neo-Hookean ones divided by s."""
     def rhs(t, y):
         lam, w, zeta = y
         a = lam * np.exp(-zeta)
-        flow = a * a - a ** -4
+        flow = (a * a - a ** -4) / (1.0 - (2 * a * a + a ** -4 - 3.0) / jlim)
         dW = 4 * c1 * (lam - lam ** -5) + 4 * c2 * (lam ** 3 - lam ** -3) + 2 * mu_v / lam * flow
         return [w, (pressure(t) * R * lam ** 2 / H - dW) / (rho * R ** 2) - damping * w, flow / (6 * tau)]
 
@@ -200,3 +203,45 @@ def test_snap_under_a_ramp_is_delayed_at_fast_rates_and_elastic_at_slow_rates(sc
     delays = [t_v / t_e - 1.0 for t_v, t_e in (times(t_lp, scene, elastic) for t_lp in (10 * TAU, 100 * TAU, 1000 * TAU))]
     assert delays[0] > delays[1] > delays[2] > 0.0
     assert delays[1] < 0.6 * delays[0] and delays[2] < 0.6 * delays[1] and delays[2] < 0.02
+
+
+JLIM_V = 0.3     # a Gent network near its lock: at the glassy start I1(a) - 3 is about 0.2 of 0.3
+
+
+def test_gent_network_creep_is_the_ode_and_converges_at_the_schemes_order():
+    """A Gent non-equilibrium network (``viscous_Jlim``): the creep curve is the homogeneous
+    balloon's ODE with the Gent network's stress and flow, and bdf2 converges at order 2 in dt."""
+    gent = build_scene("balloon", nodes=NODES, support="free", viscous_mu=MU_V, relaxation_time=TAU,
+                       viscous_Jlim=JLIM_V)
+    assert viscous_terms(gent)[0].jlims.tolist() == [JLIM_V]
+    t_end, ramp = 2.0, 0.2
+    ode = balloon_creep(t_end, lambda t: held_pressure(t, ramp), kink=ramp, jlim=JLIM_V)
+    neo = balloon_creep(t_end, lambda t: held_pressure(t, ramp), kink=ramp)
+    t_check = np.linspace(0.0, t_end, 201)
+    assert np.abs(ode(t_check)[0] - neo(t_check)[0]).max() > 3 * MESH_ERROR     # the lock matters here
+    finals = []
+    for dt in (0.02, 0.01, 0.005):
+        traj = run(gent, t_end, "bdf2", dt, ramp=ramp)
+        lam, t = traj["r"].max(axis=1) / R, traj["t"]
+        assert np.abs(lam - ode(t)[0]).max() < MESH_ERROR
+        finals.append(lam[-1])
+    ratio = abs(finals[0] - finals[1]) / abs(finals[1] - finals[2])
+    assert 4 * 0.7 < ratio < 4 * 1.4, ratio
+
+
+def test_gent_network_derivatives_are_finite_differences_and_tend_to_neo_hookean():
+    e1, e2, h = np.array([0.11, -0.05]), np.array([0.06, 0.14]), 1e-6     # I1 - 3 below JLIM_V
+    w, f1, f2, f11, f12, f22 = network_log_derivatives(e1, e2, MU_V, JLIM_V)
+    for g, (d1, d2) in ((f1, (h, 0)), (f2, (0, h))):
+        fd = (network_log_derivatives(e1 + d1, e2 + d2, MU_V, JLIM_V)[0]
+              - network_log_derivatives(e1 - d1, e2 - d2, MU_V, JLIM_V)[0]) / (2 * h)
+        np.testing.assert_allclose(g, fd, rtol=1e-8)
+    fd11 = (network_log_derivatives(e1 + h, e2, MU_V, JLIM_V)[1] - network_log_derivatives(e1 - h, e2, MU_V, JLIM_V)[1])
+    fd12 = (network_log_derivatives(e1, e2 + h, MU_V, JLIM_V)[1] - network_log_derivatives(e1, e2 - h, MU_V, JLIM_V)[1])
+    fd22 = (network_log_derivatives(e1, e2 + h, MU_V, JLIM_V)[2] - network_log_derivatives(e1, e2 - h, MU_V, JLIM_V)[2])
+    np.testing.assert_allclose([f11, f12, f22], np.array([fd11, fd12, fd22]) / (2 * h), rtol=1e-7)
+    big = network_log_derivatives(e1, e2, MU_V, 1e5)      # off neo-Hookean by O(1 / Jlim)
+    for a, b in zip(big, network_log_derivatives(e1, e2, MU_V)):
+        np.testing.assert_allclose(a, b, rtol=1e-4)
+    with pytest.raises(SnapmemError, match="viscous_Jlim"):
+        build_scene("balloon", nodes=11, viscous_mu=[0.5, 0.2], relaxation_time=[1.0, 0.1], viscous_Jlim=2.0)

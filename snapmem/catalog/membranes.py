@@ -101,6 +101,8 @@ def viscous_parameters(mu_unit="Pa") -> tuple:
                           "one value or a list 'a,b' (None: elastic)", **positive),
             ListParameter("relaxation_time", None, "s", "relaxation times of the viscous networks, one per "
                           "viscous_mu", **positive),
+            ListParameter("viscous_Jlim", None, "", "Gent locks of the viscous networks, one per viscous_mu "
+                          "(None: every network neo-Hookean)", **positive),
             Parameter("viscous_limit", "relaxed", "", "the static limit of a viscoelastic law (statics): "
                       "'relaxed' (equilibrium network alone) or 'instantaneous' (all networks, xi = 1)", str,
                       choices=VISCOUS_LIMITS))
@@ -114,7 +116,7 @@ def viscous_term(params: dict) -> ViscousNetworks | None:
     if moduli is None or times is None or len(moduli) != len(times):
         raise SnapmemError(f"viscous_mu = {moduli!r}, relaxation_time = {times!r}: set both, one relaxation "
                            "time per viscous modulus")
-    return ViscousNetworks(moduli, times, params.get("viscous_limit", "relaxed"))
+    return ViscousNetworks(moduli, times, params.get("viscous_limit", "relaxed"), params.get("viscous_Jlim"))
 
 
 def real_membrane_parameters(voltage_unit="V") -> tuple:
