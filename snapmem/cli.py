@@ -77,6 +77,30 @@ def cmd_sweep(args) -> int:
     return 0
 
 
+def _restart_state(path, scene_name: str, scene, t_end: float) -> dict:
+    """The end state of the run saved at ``path`` (``simulate --out``), to continue it to ``t_end``
+    on ``scene``: it must be a run of the same scene with the same parameters, ending before t_end."""
+    import json
+    from snapmem.dynamics.trajectory import Trajectory
+    if not Path(path).is_file():
+        raise SnapmemError(f"--restart {path}: no such file")
+    saved = Trajectory.load(path)
+    resume = saved.meta.get("resume")
+    if resume is None:
+        raise SnapmemError(f"--restart {path}: the file holds no end state to continue (a trajectory saved by "
+                           "'snapmem simulate --out' of this version)")
+    if saved.meta.get("scene") != scene_name:
+        raise SnapmemError(f"--restart {path}: a run of {saved.meta.get('scene')!r}, not of {scene_name!r}")
+    before, now = saved.meta.get("parameters", {}), json.loads(json.dumps(scene.parameters, default=str))
+    changed = sorted(k for k in set(before) | set(now) if before.get(k) != now.get(k))
+    if changed:
+        raise SnapmemError(f"--restart {path}: give the saved run's parameters; these differ: "
+                           + ", ".join(f"{k} ({before.get(k)!r} saved, {now.get(k)!r} now)" for k in changed))
+    if not t_end > resume["t"]:
+        raise SnapmemError(f"--t-end {t_end:g}: a restart continues the saved run past its end, t = {resume['t']:g} s")
+    return resume
+
+
 def cmd_simulate(args) -> int:
     import dataclasses
     from snapmem.catalog.robots import EXPERIMENTS, events, experiment
@@ -105,6 +129,7 @@ def cmd_simulate(args) -> int:
     if frames:
         changes["save_interval"] = t_end / frames
     options = dataclasses.replace(ex.options, **changes)
+    resume = _restart_state(args.restart, args.scene, ex.scene, t_end) if args.restart else None
     display = Progress(enabled=not args.quiet)
 
     def progress(t, t_end):
@@ -114,7 +139,8 @@ def cmd_simulate(args) -> int:
 
     try:
         traj = simulate(ex.scene, ex.loads, t_end, rho=ex.rho, damping=ex.damping, q0=ex.q0, v0=ex.v0,
-                        options=options, damp_bodies=ex.damp_bodies, progress=None if args.quiet else progress)
+                        options=options, damp_bodies=ex.damp_bodies, progress=None if args.quiet else progress,
+                        resume=resume)
     finally:
         display.close()
     meta = traj.meta
@@ -277,6 +303,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=integer, default=0, help="save about this many frames (default: every step)")
     p.add_argument("--out", metavar="TRAJ.npz", help="save the trajectory (compressed, no pickle)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--restart", metavar="TRAJ.npz", help="continue a run saved by 'simulate --out' (same scene "
+                   "and --set) from its end to --t-end (the absolute end time)")
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("replay", help="animate a saved trajectory to .gif or .mp4")

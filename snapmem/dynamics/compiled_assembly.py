@@ -29,7 +29,7 @@ from snapmem.kernels.assembly import (edge_assembly, edge_stretches, linear_law_
 from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,
                                     linear_barrier, linear_max_step, linear_min_gap)
 from snapmem.kernels.laws import electric_density, law_admissible, law_density, prestretch_chain
-from snapmem.kernels.viscous import log_to_stretch, network_condensed, network_internal
+from snapmem.kernels.viscous import edge_internal, log_to_stretch, network_condensed
 from snapmem.model.contact import FRACTION_TO_BOUNDARY
 
 #: The assembly's order: energy and residual (GRADIENT), and the tangent (TANGENT).
@@ -72,26 +72,35 @@ def law_with_networks(lam1, lam2, P, general_law, viscous):
     if stretched:
         w, w1, w2, w11, w12, w22 = prestretch_chain(w, w1, w2, w11, w12, w22, lp1, lp2)
     ok = True
-    if viscous is not None:
-        eps1, eps2 = np.log(lam1), np.log(lam2)
-        n = lam1.size
-        t = (np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
-        for k in range(viscous.visc_mu.size):
-            c, hat, warm = viscous.visc_c[k], viscous.zeta_hat[k], viscous.zeta_warm[k]
-            if c > 0.0:
-                z1, z2, done = network_internal(eps1, eps2, warm[0], warm[1], hat[0], hat[1], viscous.visc_mu[k],
-                                                viscous.visc_jlim[k], c)
-                ok = ok and done
-                warm[0, :] = z1
-                warm[1, :] = z2
-            else:
-                z1, z2 = hat[0], hat[1]
-            parts = network_condensed(eps1, eps2, z1, z2, hat[0], hat[1], viscous.visc_mu[k], viscous.visc_jlim[k],
-                                      c)
-            t = (t[0] + parts[0], t[1] + parts[1], t[2] + parts[2], t[3] + parts[3], t[4] + parts[4],
-                 t[5] + parts[5])
-        v, v1, v2, v11, v12, v22 = log_to_stretch(lam1, lam2, t[0], t[1], t[2], t[3], t[4], t[5])
-        w, w1, w2, w11, w12, w22 = w + v, w1 + v1, w2 + v2, w11 + v11, w12 + v12, w22 + v22
+    if viscous is not None:                  # per edge and network, numbers only (no arrays to allocate)
+        for e in range(lam1.size):
+            eps1, eps2 = np.log(lam1[e]), np.log(lam2[e])
+            t0 = t1 = t2 = t11 = t12 = t22 = 0.0
+            for k in range(viscous.visc_mu.size):
+                c, mu, jlim = viscous.visc_c[k], viscous.visc_mu[k], viscous.visc_jlim[k]
+                h1, h2 = viscous.zeta_hat[k, 0, e], viscous.zeta_hat[k, 1, e]
+                if c > 0.0:
+                    z1, z2, done = edge_internal(eps1, eps2, viscous.zeta_warm[k, 0, e], viscous.zeta_warm[k, 1, e],
+                                                 h1, h2, mu, jlim, c)
+                    ok = ok and done
+                    viscous.zeta_warm[k, 0, e] = z1
+                    viscous.zeta_warm[k, 1, e] = z2
+                else:
+                    z1, z2 = h1, h2
+                p0, p1, p2, p11, p12, p22 = network_condensed(eps1, eps2, z1, z2, h1, h2, mu, jlim, c)
+                t0 += p0
+                t1 += p1
+                t2 += p2
+                t11 += p11
+                t12 += p12
+                t22 += p22
+            v0, v1, v2, v11, v12, v22 = log_to_stretch(lam1[e], lam2[e], t0, t1, t2, t11, t12, t22)
+            w[e] += v0
+            w1[e] += v1
+            w2[e] += v2
+            w11[e] += v11
+            w12[e] += v12
+            w22[e] += v22
     return w, w1, w2, w11, w12, w22, ok
 
 

@@ -52,7 +52,8 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
              q0: np.ndarray | None = None, v0: np.ndarray | None = None, t0: float = 0.0,
              options: DynamicsOptions = DynamicsOptions(), damp_bodies: bool = False,
              progress: Callable[[float, float], None] | None = None,
-             stop: Callable[[float, np.ndarray, np.ndarray], bool] | None = None) -> Trajectory:
+             stop: Callable[[float, np.ndarray, np.ndarray], bool] | None = None,
+             resume: dict | None = None) -> Trajectory:
     """Integrate the scene's motion from t0 to t_end.
 
     Parameters
@@ -75,13 +76,17 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         Called after every accepted step.
     stop : callable (t, q, v) -> bool, optional
         Ends the run early (after recording the step) when it returns True.
+    resume : dict, optional
+        ``meta['resume']`` of an earlier run of the same scene: continue it from where it ended (its
+        time, state, next step, the scheme's history and the viscous networks' internal stretches;
+        ``q0``, ``v0`` and ``t0`` are then ignored), so that a run split in two is the one run.
 
     Returns
     -------
     Trajectory
         ``meta['status']`` is 'completed', or why the run ended early (the step fell below
         ``dt_min``, e.g. where a slack membrane crumples, or ``max_steps``); the frames up to
-        there are kept. ``meta['interrupted']`` is True when SIGINT (Ctrl-C) or SIGTERM came:
+        there are kept; ``meta['resume']`` continues the run (``resume``). ``meta['interrupted']`` is True when SIGINT (Ctrl-C) or SIGTERM came:
         the signal is taken between two steps (never inside a compiled kernel, where it would
         come back as SystemError), the run stops there with every frame so far, and the caller
         decides what to do (the command line saves them and exits 130). A second signal stops it
@@ -95,6 +100,8 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     c = xi * mass
     if not damp_bodies:
         c[scene.n_node_dofs:] = 0.0
+    if resume is not None:                          # continue an earlier run: its end is the start
+        q0, v0, t0 = resume["q"], resume["v"], float(resume["t"])
     q = scene.reference_state() if q0 is None else np.array(q0, dtype=float)
     v = np.zeros_like(q) if v0 is None else np.array(v0, dtype=float)
     v[list(scene.fixed)] = 0.0
@@ -103,6 +110,8 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         raise SolverError(f"initial state is outside the model's domain: {why}")
     stepper = _Stepper(scene, mass, c, options)
     internal = _InternalState(scene, q)      # viscous networks' internal stretches (none: does nothing)
+    if resume is not None:
+        internal.restore(resume.get("internal", {}))
     free = scene.free
     massive = free[mass[free] > 0]          # a constraint's multiplier (support = free) has no mass, nor acceleration
 
@@ -120,11 +129,14 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         return a
 
     recorder = _Recorder(scene, mass, options.save_interval, stepper.compiled, internal)
-    a_prev = acceleration(q, v, t0)
-    t, dt = t0, min(options.dt, max(t_end - t0, options.dt_min))
+    a_prev = acceleration(q, v, t0) if resume is None else np.array(resume["a_prev"], dtype=float)
+    t, dt = t0, min(options.dt, max(t_end - t0, options.dt_min)) if resume is None else float(resume["dt"])
     recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True, internal=internal.frame())
     steps = rejected = iterations = fallbacks = cuts = 0
     history = None                                     # (q_{n-1}, v_{n-1}, dt_{n-1}) of the last step
+    if resume is not None and resume.get("history") is not None:
+        hq, hv, hdt = resume["history"]
+        history = (np.array(hq, dtype=float), np.array(hv, dtype=float), float(hdt))
     status = "completed"
     scheme = SCHEME_BY_NAME[options.scheme]
     length = scene.meridian.size
@@ -231,6 +243,8 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 "nodes": scene.meridian.nodes, "closed": scene.meridian.closed,
                 "bodies": [b.name for b in scene.bodies], "options": asdict(options),
                 "interrupted": False}
+        meta["resume"] = {"t": float(t), "q": q, "v": v, "dt": float(dt), "a_prev": a_prev,
+                          "history": None if history is None else list(history), "internal": internal.state()}
         trajectory = recorder.trajectory(meta)
         internal.finish()
         trajectory.meta["interrupted"] = held.received is not None or status.startswith("interrupted")

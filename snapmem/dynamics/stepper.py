@@ -20,6 +20,7 @@ import numpy as np
 from snapmem.dynamics.compiled_step import CompiledStep
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.trajectory import Trajectory
+from snapmem.errors import SnapmemError
 from snapmem.model.contact import contact_report, contact_terms
 from snapmem.model.local_checks import failure_margins_many
 from snapmem.model.scene import Evaluation, Scene
@@ -140,6 +141,31 @@ class _InternalState:
         for term, limit in zip(self.terms, self._limits):
             term.end_step()
             term.limit = limit
+
+    def state(self) -> dict:
+        """What a continued run needs of the networks (:meth:`restore`): ``zeta`` and ``zeta_previous``
+        (K, 2, E) of every term (the scheme's history), ``dissipated`` [J]; empty without networks."""
+        if not self.terms:
+            return {}
+        return {"zeta": [term.zeta for term in self.terms], "dissipated": self.dissipated,
+                "zeta_previous": None if self.previous is None else list(self.previous)}
+
+    def restore(self, saved: dict) -> None:
+        """Continue from :meth:`state` of an earlier run (nothing to do without networks)."""
+        if not self.terms:
+            return
+        if "zeta" not in saved or len(saved["zeta"]) != len(self.terms):
+            raise SnapmemError("restart: the saved run has no internal stretches for this scene's viscous networks "
+                               "(was it run with the same viscous_mu?)")
+        for term, zeta in zip(self.terms, saved["zeta"]):
+            zeta = np.array(zeta, dtype=float)
+            if zeta.shape != term.zeta.shape:
+                raise SnapmemError(f"restart: saved internal stretches of shape {zeta.shape}, this scene's networks "
+                                   f"have {term.zeta.shape} (same nodes and viscous_mu?)")
+            term.reset(zeta)
+        previous = saved.get("zeta_previous")
+        self.previous = None if previous is None else [np.array(z, dtype=float) for z in previous]
+        self.dissipated = float(saved.get("dissipated", 0.0))
 
     def set_frame(self, xi: np.ndarray) -> None:
         """Put a frame's internal stretches ``xi`` (K, 2, E) back into the terms (to measure it)."""

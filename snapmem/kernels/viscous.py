@@ -21,7 +21,7 @@ LOCAL_TOL = 1e-14
 LOCAL_MAX_ITERATIONS = 50
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def network_log_derivatives(e1, e2, mu, jlim):
     """W of a network and its derivatives in the elastic log strains (e1, e2): (W, f1, f2, f11, f12, f22) [Pa].
 
@@ -44,24 +44,32 @@ def network_log_derivatives(e1, e2, mu, jlim):
             W11 * i2 * i2 + W1 * i22)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
+    """One Newton correction (dz1, dz2) of the implicit flow rule at the internal log stretches
+    (z1, z2): the step's incremental potential's gradient in zeta, -f_e + c A (zeta - zeta_hat),
+    solved with its Hessian f_ee + c A (positive definite). Numbers or arrays."""
+    _, f1, f2, f11, f12, f22 = network_log_derivatives(eps1 - z1, eps2 - z2, mu, jlim)
+    d1, d2 = z1 - zhat1, z2 - zhat2
+    g1 = -f1 + c * (4.0 * d1 + 2.0 * d2)
+    g2 = -f2 + c * (2.0 * d1 + 4.0 * d2)
+    k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
+    det = k11 * k22 - k12 * k12
+    return (k22 * g1 - k12 * g2) / det, (k11 * g2 - k12 * g1) / det
+
+
 @njit(cache=True, nogil=True)
 def network_internal(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
-    """The implicit flow rule of one network on every edge: Newton on the step's incremental
-    potential in zeta from (zeta1, zeta2) (convex: its Hessian f_ee + c A is positive definite).
+    """The implicit flow rule of one network on every edge: Newton (:func:`flow_newton_step`) on the
+    step's incremental potential in zeta from (zeta1, zeta2), until every correction is below
+    :data:`LOCAL_TOL` (convex: its Hessian f_ee + c A is positive definite).
 
     eps1, eps2, zeta1, zeta2, zhat1, zhat2 : (E,) the log stretches, the start, the anchor; mu,
     jlim the network's modulus [Pa] and lock; c = eta / h [Pa]. Returns (zeta1, zeta2, converged).
     """
     z1, z2 = zeta1.copy(), zeta2.copy()
     for _ in range(LOCAL_MAX_ITERATIONS):
-        _, f1, f2, f11, f12, f22 = network_log_derivatives(eps1 - z1, eps2 - z2, mu, jlim)
-        d1, d2 = z1 - zhat1, z2 - zhat2
-        g1 = -f1 + c * (4.0 * d1 + 2.0 * d2)
-        g2 = -f2 + c * (2.0 * d1 + 4.0 * d2)
-        k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
-        det = k11 * k22 - k12 * k12
-        step1 = (k22 * g1 - k12 * g2) / det
-        step2 = (k11 * g2 - k12 * g1) / det
+        step1, step2 = flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c)
         z1 = z1 - step1
         z2 = z2 - step2
         if max(np.max(np.abs(step1)), np.max(np.abs(step2))) < LOCAL_TOL:
@@ -69,7 +77,20 @@ def network_internal(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
     return z1, z2, False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
+def edge_internal(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
+    """:func:`network_internal` on one edge (numbers): the compiled step's, which needs no arrays;
+    each edge stops at its own convergence. Returns (zeta1, zeta2, converged)."""
+    for _ in range(LOCAL_MAX_ITERATIONS):
+        step1, step2 = flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c)
+        z1 -= step1
+        z2 -= step2
+        if max(abs(step1), abs(step2)) < LOCAL_TOL:
+            return z1, z2, True
+    return z1, z2, False
+
+
+@njit(cache=True, nogil=True, inline="always")
 def network_condensed(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
     """One network's density in the log strains eps at its internal log stretches zeta: (w, f1, f2,
     f11, f12, f22) [Pa].
@@ -95,7 +116,7 @@ def network_condensed(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
     return w, f1, f2, f11 - s11, f12 - s12, f22 - s22
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def log_to_stretch(lam1, lam2, w, f1, f2, f11, f12, f22):
     """A density's derivatives in the log strains as derivatives in the stretches: w_i = f_i / lam_i,
     w_ij = (f_ij - delta_ij f_i) / (lam_i lam_j). Returns (w, w1, w2, w11, w12, w22)."""
