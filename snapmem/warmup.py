@@ -12,7 +12,8 @@ A kernel already in the cache is loaded, not compiled, and shows a load time of 
 
 The compiled time step is compiled for the kinds of terms a scene has (a law other than the
 linear-in-invariants ones, linear contacts, balls; see :mod:`snapmem.dynamics.compiled_assembly`):
-``snapmem warmup`` compiles the one of torus_snap (no contact), ``--all`` those of every robot.
+``snapmem warmup`` compiles the one of torus_snap (no contact), ``--all`` those of every robot
+and of a viscoelastic torus_snap (the viscous networks, snapmem.kernels.viscous).
 """
 
 from __future__ import annotations
@@ -54,11 +55,11 @@ def _trace_balloon():
     trace(build_scene("balloon", nodes=21), "pressure", until={"stretch_max": 2.5})
 
 
-def _simulate(name: str, t_end: float | None = None):
+def _simulate(name: str, t_end: float | None = None, **params):
     def run():
         from snapmem.catalog.robots import experiment
         from snapmem.dynamics.driver import simulate
-        ex = experiment(name)
+        ex = experiment(name, **params)
         simulate(ex.scene, ex.loads, ex.t_end if t_end is None else t_end, rho=ex.rho, damping=ex.damping,
                  q0=ex.q0, v0=ex.v0, options=ex.options, damp_bodies=ex.damp_bodies)
     return run
@@ -71,6 +72,8 @@ def _tasks(everything: bool) -> list:
         from snapmem.catalog.robots import EXPERIMENTS
         tasks += [(f"simulate {name} (first steps)", _simulate(name, 0.05)) for name in EXPERIMENTS
                   if name != "torus_snap"]
+        tasks.append(("simulate torus_snap viscoelastic (compiled viscous networks)",
+                      _simulate("torus_snap", 2.0, viscous_mu=1000.0, relaxation_time=10.0)))
     return tasks
 
 

@@ -12,7 +12,8 @@ the step's incremental potential with the Python Newton's own rules (``snapmem.s
 Every robot's steps, iteration counts and events are those of the general path.
 
 What it covers: a scene whose every term declares what the kernel needs (``Term.compiled``,
-see :mod:`snapmem.model.terms`): one stretching law of a kind in snapmem.kernels.laws, electric
+see :mod:`snapmem.model.terms`): one stretching law of a kind in snapmem.kernels.laws (possibly
+mounted prestretched), at most one set of viscous networks (snapmem.model.viscous), electric
 terms, at most one pressure work, contacts with a linear gap (rod, shell, plane) and balls in edge
 mode (with or without a body of their own); and the 'energy' line search of
 :class:`snapmem.dynamics.driver.DynamicsOptions`. :meth:`CompiledStep.of` returns None otherwise

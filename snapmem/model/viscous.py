@@ -5,6 +5,10 @@ reference volume, a neo-Hookean energy of the elastic part of the stretch,
 
     W_k = (mu_k / 2) (a1^2 + a2^2 + a1^-2 a2^-2 - 3),    a_i = lam_i / xi_ki,
 
+or a Gent one, -(mu_k Jlim_k / 2) ln(1 - (I1(a) - 3) / Jlim_k), for a finite lock Jlim_k
+(``viscous_Jlim``); the formulas are snapmem.kernels.viscous's, which the compiled time step
+evaluates too,
+
 with xi_ki the network's internal (viscous) stretches, one pair per edge. In log strains
 eps_i = ln lam_i, zeta_i = ln xi_ki, e_i = eps_i - zeta_i, the flow rule is
 
