@@ -122,3 +122,30 @@ def log_to_stretch(lam1, lam2, w, f1, f2, f11, f12, f22):
     w_ij = (f_ij - delta_ij f_i) / (lam_i lam_j). Returns (w, w1, w2, w11, w12, w22)."""
     return (w, f1 / lam1, f2 / lam2, (f11 - f1) / (lam1 * lam1), f12 / (lam1 * lam2),
             (f22 - f2) / (lam2 * lam2))
+
+
+@njit(cache=True, nogil=True)
+def step_dissipation(zeta_star, zeta_hat, h, dt, viscosities, weight):
+    """Energy the dashpots dissipate over a step of length dt [s] [J]: dt eta_k r^T A r summed over
+    networks k and edges (weighted by the edges' reference volumes ``weight`` (E,) [m^3]), with
+    r = (zeta* - zeta_hat) / h the step's flow rate; zeta_star, zeta_hat (K, 2, E)."""
+    total = 0.0
+    for k in range(zeta_star.shape[0]):
+        for e in range(zeta_star.shape[2]):
+            r1 = (zeta_star[k, 0, e] - zeta_hat[k, 0, e]) / h
+            r2 = (zeta_star[k, 1, e] - zeta_hat[k, 1, e]) / h
+            total += viscosities[k] * (4.0 * r1 * r1 + 4.0 * r1 * r2 + 4.0 * r2 * r2) * weight[e]
+    return dt * total
+
+
+@njit(cache=True, nogil=True)
+def stored_energy(lam1, lam2, zeta, moduli, jlims, weight):
+    """The networks' elastic energy [J] at the stretches (lam1, lam2) (E,) with their internal log
+    stretches ``zeta`` (K, 2, E) held, weighted by the edges' reference volumes ``weight`` (E,) [m^3]."""
+    total = 0.0
+    for e in range(lam1.size):
+        eps1, eps2 = np.log(lam1[e]), np.log(lam2[e])
+        for k in range(zeta.shape[0]):
+            total += weight[e] * network_log_derivatives(eps1 - zeta[k, 0, e], eps2 - zeta[k, 1, e], moduli[k],
+                                                         jlims[k])[0]
+    return total

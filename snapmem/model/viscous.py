@@ -41,6 +41,7 @@ import numpy as np
 
 from snapmem.errors import SnapmemError, check_real
 from snapmem.kernels import viscous as _kernel
+from snapmem.kernels.switch import compiled
 from snapmem.model.kinematics import EdgeKinematics
 from snapmem.model.materials import Density
 from snapmem.model.terms import DensityTerm, ViscousDeclaration
@@ -177,21 +178,18 @@ class ViscousNetworks(DensityTerm):
         return self.internal(scene.kinematics(y))
 
     def step_dissipation(self, zeta_new_mid: np.ndarray, dt: float, weight: np.ndarray) -> float:
-        """Energy dissipated by the dashpots over a step of length dt [s] [J].
-
-        dt eta_k r^T A r summed over networks and edges (weighted by the edges' reference volumes
-        ``weight`` (E,) [m^3]), with r = (zeta* - zeta_hat) / h the step's flow rate."""
+        """Energy dissipated by the dashpots over a step of length dt [s] [J]: dt eta_k r^T A r summed
+        over networks and edges (weighted by the edges' reference volumes ``weight`` (E,) [m^3]),
+        with r = (zeta* - zeta_hat) / h the step's flow rate (snapmem.kernels.viscous)."""
         h, zeta_hat = self._step
-        r = (zeta_new_mid - zeta_hat) / h
-        quad = 4.0 * r[:, 0] ** 2 + 4.0 * r[:, 0] * r[:, 1] + 4.0 * r[:, 1] ** 2
-        return float(dt * np.sum(self.viscosities[:, None] * quad * weight[None]))
+        kernel = _kernel.step_dissipation if compiled() else _kernel.step_dissipation.py_func
+        return float(kernel(zeta_new_mid, zeta_hat, h, dt, self.viscosities, weight))
 
     def stored_energy(self, kin: EdgeKinematics, zeta: np.ndarray, weight: np.ndarray) -> float:
         """The networks' elastic energy [J] at the stretches ``kin`` with the internal log stretches
         ``zeta`` (K, 2, E) held, weighted by the edges' reference volumes ``weight`` (E,) [m^3]."""
-        eps1, eps2 = np.log(kin.lam1), np.log(kin.lam2)
-        return float(sum(weight @ network_log_derivatives(eps1 - zeta[k, 0], eps2 - zeta[k, 1], self.moduli[k],
-                                                          self.jlims[k])[0] for k in range(self.networks)))
+        kernel = _kernel.stored_energy if compiled() else _kernel.stored_energy.py_func
+        return float(kernel(kin.lam1, kin.lam2, np.ascontiguousarray(zeta), self.moduli, self.jlims, weight))
 
     # ------------------------------------------------------------------------------------------
     # the density
