@@ -144,7 +144,7 @@ class ViscousNetworks(DensityTerm):
 
     def commit(self, zeta: np.ndarray) -> None:
         """Take ``zeta`` (K, 2, E) as the new state (after an accepted step)."""
-        self.zeta = np.array(zeta, dtype=float)
+        self.zeta = np.asarray(zeta, dtype=float)        # the stepper hands a fresh array
 
     # ------------------------------------------------------------------------------------------
     # the local problem
