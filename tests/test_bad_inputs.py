@@ -201,7 +201,16 @@ ERRORS = [
      ["load 'voltage'", "no such load", "['pressure']"]),
     ("tolerance zero", lambda: NewtonOptions(tol=0), None, ["tol = 0", "> 0"]),
     ("max_iterations zero", lambda: NewtonOptions(max_iterations=0), None, ["max_iterations = 0", ">= 1"]),
+    # found by the fuzz (exit 1 after 2000 steps on ba9bbf1): the loading cannot go up to a peak below
+    # where the snap settled; refused once the limit point (p_hat 0.0142464) is known
+    ("hysteresis peak below the snap", lambda: _hysteresis_peak(0.0),
+     ["hysteresis", "balloon", "--set", "nodes=11", "--peak", "0"], ["peak = 0.0", "must be > 0.01426"]),
 ]
+
+
+def _hysteresis_peak(peak):
+    from snapmem.continuation.hysteresis import hysteresis
+    return hysteresis(build_scene("balloon", nodes=11), "pressure", peak=peak)
 
 # (id, API call returning an Equilibrium, CLI argv, status, words of the reason)
 RESULTS = [

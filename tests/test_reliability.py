@@ -402,3 +402,48 @@ def test_a_user_law_with_wrong_derivatives_is_refused():
     assert eq.converged                                        # opted out: the user's responsibility
     good = equilibrium(build_scene("balloon", nodes=9, pressure=0.005, law=snapmem.NeoHookean(1.0)))
     assert good.converged and good.measures()["stretch"] != pytest.approx(eq.measures()["stretch"], rel=1e-3)
+
+
+# ------------------------------------------------------------------------------------------
+# the stiff contact case: the rounding floor counts the contact barriers' noise
+@pytest.fixture(scope="module")
+def stiff_rod_contact():
+    """The gripper on a 4 cm rod at 2000 Pa, kappa = 1e9 Pa, barrier width 1e-7 of the rod."""
+    from snapmem.statics import equilibrium
+    scene = build_scene("gripper_rod", Rw=0.04, dhat=1e-7 * 0.04, kappa=1e9, pressure=2000.0)
+    return scene, equilibrium(scene)
+
+
+def test_the_stiffest_rod_contact_converges_to_the_thin_barrier_force(stiff_rod_contact):
+    """Failed on ba9bbf1 ('no equilibrium on the load path beyond pressure = 1729.71', rod force 0):
+    the barrier's stiffness (~1e13 N/m) times the round-off of a radius is a force noise of ~6e-5 N,
+    above Newton's tolerance (5e-10 N), and the rounding floor counted membrane forces only. Now
+    converged, with the gap in (0, dhat) and the rod force of the 1e-5 barrier (273.74 N) to 1e-4."""
+    from snapmem.model.contact import contact_report
+    scene, eq = stiff_rod_contact
+    report = contact_report(scene, eq.q)
+    assert eq.converged, eq.report.reason
+    assert 0 < report["rod_gap"] < 1e-7 * 0.04
+    assert math.isfinite(report["rod_force"]) and report["rod_force"] == pytest.approx(273.74, rel=1e-4)
+    # it is an equilibrium to the barrier's noise, not a state accepted far from one
+    assert eq.report.residual_norm < 1e-7 * report["rod_force"]
+
+
+def test_the_rounding_floor_is_the_barriers_measured_noise(stiff_rod_contact):
+    """eps x (barrier stiffness x coordinate) is the noise: moving every coordinate by one ulp
+    changes the residual by 5.5e-5 N at the state above, against 7.1e-5 N estimated (ba9bbf1's
+    floor was 8.9e-11 N, 6e5 times too low). The floor holds it divided by STALL_FACTOR, so only
+    the stall rule accepts a residual at that noise."""
+    from snapmem.kernels.assembly import STALL_FACTOR
+    scene, eq = stiff_rod_contact
+    ev = scene.evaluate(eq.q, eq.loads, 2)
+    x = scene.node_coordinates(eq.q)
+    rounding = max(t.node_local(x, eq.q[s], scene.node_area, eq.loads, 2).barrier_rounding
+                   for t, s in zip(scene.node_terms, scene.dofs.body_slices))
+    estimate = np.finfo(float).eps * rounding
+    rng = np.random.default_rng(0)
+    q = eq.q
+    measured = max(float(np.max(np.abs(scene.evaluate(np.nextafter(q, q + rng.choice([-1.0, 1.0], q.size)),
+                                                      eq.loads, 2).residual - ev.residual))) for _ in range(3))
+    assert 0.5 * estimate < measured < 2.0 * estimate
+    assert ev.residual_floor == pytest.approx(estimate / STALL_FACTOR, rel=0.05)      # the membrane's part is tiny

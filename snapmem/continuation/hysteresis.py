@@ -70,7 +70,9 @@ def hysteresis(scene: Scene, control: str = "pressure", peak: float | None = Non
         Its loads give the start (e.g. pressure 0).
     control : {'pressure', 'voltage', 'E_hat'}
     peak : float, optional
-        The control value the loading goes up to after the snap (default 1.05 x the limit).
+        The control value the loading goes up to after the snap (default 1.05 x the limit); it
+        must exceed the control the snap settled at (the limit pushed by ``push``), else a
+        SnapmemError (bad input) is raised once that is known, after the loading's trace.
     push : float
         How far past a limit point the load is pushed before the dynamics runs, relative to it.
     rho, damping : float, optional
@@ -119,7 +121,11 @@ def hysteresis(scene: Scene, control: str = "pressure", peak: float | None = Non
         return Hysteresis(_join(segments), pd.DataFrame(snaps), "the snap did not come to rest")
     if not snaps[-1]["jumped"]:
         return Hysteresis(_join(segments), pd.DataFrame(snaps), _no_jump(snaps[-1], control))
-    peak = check_real("peak", peak if peak is not None else 1.05 * lam_up)
+    settled = snaps[-1]["control_settled"]
+    if peak is None:
+        peak = 1.05 * lam_up
+    else:                                # the loading goes on from where the snap settled: up, not down
+        peak = check_real("peak", peak, minimum=settled, min_inclusive=False)
     after = trace(scene, control, until={control: peak}, start=(rest.q, rest.loads), options=replace(options, direction=1))
     segments.append(after.table.assign(segment="after snap"))
     top = after.states[-1]

@@ -135,12 +135,18 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
     border = np.zeros((k, nb))
     corner = np.zeros((k, k))
     x = q[: P.n_node_dofs].reshape(-1, 2)
+    barrier_rounding = 0.0                # as snapmem.model.contact.barrier_rounding (the rounding floor's)
     if linear is not None:
         for c in range(linear.lin_axis.size):              # rod, shell, plane: node barriers
             nodes = linear.lin_nodes[linear.lin_ptr[c]: linear.lin_ptr[c + 1]]
             e_c, near, g, h = linear_barrier(x, nodes, linear.lin_axis[c], linear.lin_sign[c], linear.lin_offset[c],
                                              linear.lin_coef[c], linear.lin_dhat[c], order)
             energy += e_c
+            if order >= 2 and near.size:
+                span = abs(linear.lin_offset[c])
+                for m in range(near.size):
+                    span = max(span, abs(x[near[m], linear.lin_axis[c]]))
+                barrier_rounding = max(barrier_rounding, np.max(np.abs(h)) * span)
             for m in range(near.size):
                 i = near[m]
                 gradient[2 * i] += g[m, 0]
@@ -157,6 +163,13 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
             e_c, which, g, h = ball_edge_barrier(x, P.edges, zc, balls.ball_radius[c], balls.ball_dhat[c],
                                                  balls.ball_coef[c], body, order)
             energy += e_c
+            if order >= 2 and which.size:
+                span = abs(zc)
+                for m in range(which.size):
+                    for a in range(2):
+                        node = P.edges[which[m], a]
+                        span = max(span, abs(x[node, 0]), abs(x[node, 1]))
+                barrier_rounding = max(barrier_rounding, np.max(np.abs(h)) * span)
             if body:
                 energy += balls.ball_weight[c] * zc
                 gradient[dof] += balls.ball_weight[c]
@@ -191,7 +204,7 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
         lower[0, i] += inertia[i]
     for i in range(k):
         corner[i, i] += inertia[nb + i]
-    return energy, residual, lower, border, corner, residual_floor(P.n_node_dofs // 2, force)
+    return energy, residual, lower, border, corner, residual_floor(P.n_node_dofs // 2, force, barrier_rounding)
 
 
 @njit(cache=True, nogil=True)

@@ -24,11 +24,30 @@ def swept_volume(ra, rb, dz, scale):
     return c0 * s * dz, c, c * s, c * (2.0 * ra + rb), c * (ra + 2.0 * rb)
 
 
+#: Newton's stall rule accepts a residual within this factor of max(tol, floor) once its steps are at the
+#: rounding of q (snapmem.solvers.rules.converged; defined here because the floor below divides by it).
+STALL_FACTOR = 1e3
+
+
 @njit(cache=True, nogil=True, inline="always")
-def residual_floor(n_nodes, force):
-    """The residual's rounding floor [N]: 64 eps N max|edge force entry| (nodal forces are sums of
-    edge forces computed from coordinate differences; see snapmem.model.scene.Evaluation)."""
-    return 64.0 * _EPS * n_nodes * force
+def residual_floor(n_nodes, force, barrier_rounding):
+    """The residual's rounding floor [N], the one formula of it (``Scene.evaluate`` and the compiled
+    step's assembly call it): 64 eps N ``force`` + eps ``barrier_rounding`` / STALL_FACTOR.
+
+    The first part is the membrane's: nodal forces are sums of edge forces computed from coordinate
+    differences (``force``, the largest edge force entry [N]; see snapmem.model.scene.Evaluation).
+
+    The second is the contact barriers': a barrier's force is its stiffness times a gap computed
+    from coordinates rounded to eps |x|, so it carries a noise of eps ``barrier_rounding``, the
+    largest barrier Hessian entry [N/m] times the largest |coordinate| its gaps are computed from
+    [m] (0 without an active barrier; :func:`snapmem.model.contact.barrier_rounding`). A barrier
+    of 1e-7 of a 4 cm rod at kappa = 1e9 Pa is ~1e13 N/m stiff: ~1e-4 N of noise, far above
+    Newton's tolerance. It enters divided by STALL_FACTOR, so a residual at that noise is accepted
+    by the stall rule only, once Newton's steps are at the rounding of q: a state within
+    STALL_FACTOR of the noise still gains from more steps (one more step takes such a gripper
+    from 3e-2 N to 3e-5 N).
+    """
+    return 64.0 * _EPS * n_nodes * force + _EPS * barrier_rounding / STALL_FACTOR
 
 
 @njit(cache=True, nogil=True, inline="always")

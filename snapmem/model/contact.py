@@ -31,6 +31,17 @@ from snapmem.model.terms import BallDeclaration, LinearContactDeclaration, NodeL
 FRACTION_TO_BOUNDARY = 0.9
 
 
+def barrier_rounding(hessian: np.ndarray, coordinates: np.ndarray, extra: float = 0.0) -> float:
+    """A barrier's largest |Hessian entry| [N/m] times the largest of |coordinates| and |extra| [m]
+    (the coordinates its active gaps are computed from, and the body's offset or centre): eps times
+    it is the noise their round-off puts in its forces [N], a part of the residual's rounding floor
+    (snapmem.kernels.assembly.residual_floor; the compiled step's assembly takes the same). 0 if
+    no gap is active."""
+    if not hessian.size:
+        return 0.0
+    return float(np.max(np.abs(hessian))) * max(float(np.max(np.abs(coordinates))), abs(extra))
+
+
 def barrier(d: np.ndarray, dhat: float, order: int = 2):
     """IPC barrier b(d) and its first two derivatives in d (zero where d >= dhat; +inf for d <= 0).
 
@@ -105,6 +116,7 @@ class Contact(NodeTerm):
                 out.gradient = grad
             if order >= 2:
                 out.hessian = hess
+                out.barrier_rounding = barrier_rounding(hess, x[near, axis], offset)
             return out
         d = self.gap(x[idx], y, 0)[0]
         near = d < self.dhat                       # only nodes within the barrier width feel it
@@ -124,10 +136,15 @@ class Contact(NodeTerm):
             out.hessian = (c * b2)[:, None, None] * dg[:, :, None] * dg[:, None, :]
             if dh is not None:
                 out.hessian += (c * b1)[:, None, None] * dh
+            out.barrier_rounding = barrier_rounding(out.hessian, x[idx], self._centre(y))
         return out
 
     def body_energy(self, y) -> float:
         """Energy of the body alone (its weight) [J]."""
+        return 0.0
+
+    def _centre(self, y) -> float:
+        """The body coordinate a node gap is measured from [m] (a ball's centre height; 0 here)."""
         return 0.0
 
     def body_energy_derivatives(self, y, order):
@@ -381,6 +398,7 @@ class Ball(Contact):
             out.edge_gradient = grad
         if order >= 2:
             out.edge_hessian = hess
+            out.barrier_rounding = barrier_rounding(hess, x[self.meridian.edges[which]], self._centre(y))
         return out
 
     def gaps(self, x, y):

@@ -46,9 +46,11 @@ class Evaluation:
         K = d2Pi/dq2 on the free degrees of freedom, in band order [N/m] (bordered by one dense
         row and column per rigid body when the scene has bodies).
     residual_floor : float
-        The residual's rounding floor [N]: nodal forces are sums of edge forces computed from
-        coordinate differences, so |R| cannot fall below about eps N max|edge force| (64 eps N
-        times it is used). Solvers converge at max(their tolerance, this floor).
+        The residual's rounding floor [N] (snapmem.kernels.assembly.residual_floor): nodal forces
+        are sums of edge forces computed from coordinate differences, so |R| cannot fall below
+        about eps N max|edge force| (64 eps N times it is used), and a contact barrier's force
+        carries its stiffness times the coordinates' round-off. Solvers converge at max(their
+        tolerance, this floor).
     """
 
     energy: float
@@ -197,12 +199,14 @@ class Scene:
         kin = self.kinematics(q)
         dens = self.density(kin, loads)
         if order >= 1 and dens is not None and self._compilable and compiled():
-            energy, gradient, band, floor = self._membrane_compiled(q, kin, dens, loads, order)
+            energy, gradient, band, force = self._membrane_compiled(q, kin, dens, loads, order)
         else:
-            energy, gradient, band, floor = self._membrane(q, kin, dens, loads, order)
+            energy, gradient, band, force = self._membrane(q, kin, dens, loads, order)
         x = self.node_coordinates(q)
+        barrier_rounding = 0.0
         for term, s in zip(self.node_terms, self.dofs.body_slices):
             local = term.node_local(x, q[s], self.node_area, loads, order)
+            barrier_rounding = max(barrier_rounding, local.barrier_rounding)
             energy += local.energy
             if order >= 1:
                 self._add_node_term(local, s, gradient, band, order)
@@ -216,11 +220,12 @@ class Scene:
                                                 self.bandwidth)
             if self.bodies:
                 stiffness = BodyMatrix(stiffness, band.border.T, band.corner)
+        floor = residual_floor(self.meridian.nodes, force, barrier_rounding)
         return Evaluation(energy, gradient, gradient[self.free], stiffness, floor)
 
     def _membrane(self, q, kin, dens, loads, order):
         """Energy, gradient (n_dof,), flat band (with a trash slot; None below order 2) and the
-        residual's rounding floor of the density and edge terms, by numpy."""
+        largest edge force entry [N] of the density and edge terms (for the rounding floor), by numpy."""
         energy = 0.0
         grad_local = hess_local = None
         if dens is not None:
@@ -242,7 +247,7 @@ class Scene:
         band = None
         if order >= 2:
             band = _Band(np.bincount(self.dofs.hess_index, hess_local.reshape(-1), minlength=self.dofs.band_size + 1))
-        return energy, gradient, band, residual_floor(self.meridian.nodes, float(np.max(np.abs(grad_local))))
+        return energy, gradient, band, float(np.max(np.abs(grad_local)))
 
     def _membrane_compiled(self, q, kin, dens, loads, order):
         """As :meth:`_membrane`, by the compiled kernel (snapmem.kernels.assembly.edge_assembly)."""
@@ -252,7 +257,7 @@ class Scene:
             q, m.edges, kin.inv_length, kin.inv_mid_radius, self.weight, dens.w1, dens.w2, dens.w11, dens.w12,
             dens.w22, pressure, self.dofs.hess_index, self.dofs.band_size, order)
         energy = float(self.weight @ dens.w) - pressure * volume
-        return energy, gradient, (_Band(band) if order >= 2 else None), residual_floor(m.nodes, force)
+        return energy, gradient, (_Band(band) if order >= 2 else None), force
 
     def _empty_band(self, order):
         return _Band(np.zeros(self.dofs.band_size + 1)) if order >= 2 else None

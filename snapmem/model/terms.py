@@ -298,6 +298,10 @@ class NodeLocal:
     edge_gradient, edge_hessian : ndarray (M_e, 4 + k), (4 + k, 4 + k, M_e) or None
         Parts summed over edges instead (an edge's distance to a body), in each edge's local
         coordinates (r_a, z_a, r_b, z_b) followed by y; the Hessian entry-major like edge terms'.
+    barrier_rounding : float
+        A contact barrier's largest |Hessian entry| times the largest |coordinate| its gaps are
+        computed from [N] (0 otherwise, or below order 2): eps times it is the noise the
+        coordinates' round-off puts in its forces (snapmem.kernels.assembly.residual_floor).
     """
 
     energy: float
@@ -309,6 +313,7 @@ class NodeLocal:
     edges: np.ndarray | None = None
     edge_gradient: np.ndarray | None = None
     edge_hessian: np.ndarray | None = None
+    barrier_rounding: float = 0.0
 
 
 class NodeTerm(Term):

@@ -13,12 +13,14 @@ from collections import namedtuple
 import numpy as np
 from snapmem._lazy import njit
 
+from snapmem.kernels.assembly import STALL_FACTOR
+
 #: Armijo fraction: a step is accepted when the merit falls by this fraction of its linear model.
 ARMIJO = 1e-4
 #: A rejected step is multiplied by this (halving).
 CUT = 0.5
-#: Converged at rounding: the residual within this factor of the tolerance ...
-STALL_FACTOR = 1e3
+#: Converged at rounding: the residual within STALL_FACTOR (1e3, defined with the rounding floor in
+#: snapmem.kernels.assembly, whose barrier part divides by it) of the tolerance ...
 #: ... while the last step was below this fraction of max |q|.
 STALL_STEP = 1e-10
 #: With the 'energy' merit, a step that multiplies max |R| by at most this is accepted too.
