@@ -249,6 +249,57 @@ class ChamberProblem(LoadProblem):
     def start_loads(self, loads: dict) -> dict:
         return loads
 
+    # ----------------------------------------------------------------------------------------
+    def exchange(self) -> np.ndarray | None:
+        """The permutation P of the unknowns x that exchanges two identical membranes (x -> x[P]),
+        if the problem has that symmetry, else None.
+
+        Symmetric: a scene of two membranes with the same number of free degrees of freedom,
+        each bounding the same chambers with the same sign, whose residual and energy commute with
+        the exchange: F(P x) = P F(x) to 1e-12 relative at a deformed, unequal state (checked
+        numerically, so any difference of law, thickness, radius, voltage or supports breaks it).
+        Then the branch through a symmetric state along an antisymmetric direction has as its
+        mirror image the branch along the opposite direction (branch switching traces one half).
+        """
+        if getattr(self, "_exchange", False) is not False:
+            return self._exchange
+        self._exchange = None
+        sc = self.scene
+        if len(sc.membranes) != 2 or sc.membranes[0].n_free != sc.membranes[1].n_free:
+            return None
+        if sc.chamber_of[0] != sc.chamber_of[1] or (self.load or "").startswith("voltage_"):
+            return None                       # (a voltage control drives one membrane only)
+        if not np.array_equal(sc.membranes[0].reference_state(), sc.membranes[1].reference_state()):
+            return None
+        m = sc.n_free // 2
+        perm = np.concatenate([np.arange(m, 2 * m), np.arange(m), np.arange(2 * m, self.n)])
+        x0, lam0 = self.x_of(self._reference), self._probe_parameter()
+        wave = np.sin(np.arange(self.n) * 0.7 + 0.3)
+        x = x0 + 1e-2 * sc.meridian.size * wave * (np.arange(self.n) < sc.n_free)
+        x[sc.n_free:] = 0.01 * self.p_scale
+        F, _ = self.evaluate(x, lam0, order=1)
+        F_mirror, _ = self.evaluate(x[perm], lam0, order=1)
+        if np.max(np.abs(F_mirror - F[perm])) <= 1e-12 * max(np.max(np.abs(F)), 1e-300):
+            self._exchange = perm
+        return self._exchange
+
+    def _probe_parameter(self) -> float:
+        """A value of the parameter to test the exchange at (the reference volume or gas amount)."""
+        if self.load is not None:
+            return self.base.get(self.load, 0.0)
+        ch = self.scene.chambers[self.controlled]
+        v = self.scene.chamber_volume(self._reference, self.controlled)
+        return v if ch.kind is ChamberKind.VOLUME else ch.p_atm * v
+
+    def mirrored_point(self, p, perm: np.ndarray):
+        """The exchange image of a point: state, tangent and eigenvectors permuted by ``perm``
+        (:meth:`exchange`), the same parameter, eigenvalues and inertia."""
+        from dataclasses import replace
+        tangent = None if p.tangent is None else np.append(p.tangent[:-1][perm], p.tangent[-1])
+        return replace(p, x=p.x[perm], tangent=tangent,
+                       vectors=None if p.vectors is None else p.vectors[perm],
+                       subspace=None if p.subspace is None else p.subspace[perm], measured=None)
+
 
 def _chamber_problem(scene, control):
     """The problem of a multi-membrane scene (None for any other scene)."""
