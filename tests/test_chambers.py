@@ -153,3 +153,70 @@ def test_balloon_on_a_gas_reservoir_is_the_gas_chamber_scene(tmp_path):
     from snapmem.errors import SnapmemError
     with pytest.raises(SnapmemError, match="gas sets the pressure"):
         build_scene("balloon", chamber="gas", pressure=0.01)
+
+
+# ---------------------------------------------------------------------------------------------
+# the adiabatic gas chamber: P V^gamma = C
+def test_adiabatic_energy_gradient_and_hessian_by_finite_differences():
+    """-dE/dV is the gauge pressure C / V^gamma - p_atm and d2E/dV2 the gas' stiffness, by central
+    differences; -dV/dp (the compliance) is its inverse; at gamma = 1 the formulas are the isothermal ones."""
+    from snapmem.model.chambers import gas_compliance, gas_pressure, gas_stiffness, gas_volume
+    amount, p_atm, v = 3.0, 0.25, 7.0
+    for gamma in (1.0, 1.4, 5.0 / 3.0):
+        h = 1e-4 * v
+        E = [gas_energy(v + k * h, amount, p_atm, gamma) for k in (-1, 0, 1)]
+        assert -(E[2] - E[0]) / (2 * h) == pytest.approx(gas_pressure(v, amount, p_atm, gamma), rel=1e-7)
+        assert (E[2] - 2 * E[1] + E[0]) / h ** 2 == pytest.approx(gas_stiffness(v, amount, p_atm, gamma), rel=1e-6)
+        p = gas_pressure(v, amount, p_atm, gamma)
+        assert gas_volume(p, amount, p_atm, gamma) == pytest.approx(v, rel=1e-14)
+        assert gas_compliance(p, amount, p_atm, gamma) == pytest.approx(1 / gas_stiffness(v, amount, p_atm, gamma),
+                                                                       rel=1e-13)
+    near = 1.0 + 2.0 ** -30            # gamma -> 1: E - C / (gamma - 1) tends to the isothermal energy
+    assert gas_energy(v, amount, p_atm, near) - amount / (near - 1) == pytest.approx(gas_energy(v, amount, p_atm),
+                                                                                     abs=1e-5)
+
+
+def test_adiabatic_chamber_jacobian_is_the_residuals_derivative():
+    """The bordered Jacobian J = [[K, -G], [-G^T, -D]] of a balloon on an adiabatic reservoir
+    against central differences of its residual, at a deformed state and a pressure off equilibrium."""
+    from snapmem.continuation.problems import make_problem
+    scene = build_scene("balloon", nodes=21, chamber="adiabatic", gas_volume=2 * float(balloon_volume(1.0)))
+    pb = make_problem(scene, "gas_amount")
+    x = pb.x_of(scene.reference_state(), {"pressure_1": 0.0} if "pressure_1" in scene.loads else None)
+    x = x.copy()
+    x[:-1] *= 1.0 + 0.05 * np.cos(np.arange(x.size - 1))
+    x[-1] = 0.01
+    lam = 0.3 * float(balloon_volume(1.0)) ** 1.4
+    F, J = pb.evaluate(x, lam)
+    dense = J.to_dense()
+    h = 1e-6
+    for j in range(0, x.size, 5):
+        e = np.zeros(x.size)
+        e[j] = h * max(abs(x[j]), 1.0)
+        column = (pb.evaluate(x + e, lam, order=1)[0] - pb.evaluate(x - e, lam, order=1)[0]) / (2 * e[j])
+        assert np.allclose(column, dense[:, j], rtol=1e-5, atol=1e-6 * np.abs(dense).max())
+    dl = 1e-6 * lam
+    fd = (pb.evaluate(x, lam + dl, order=1)[0] - pb.evaluate(x, lam - dl, order=1)[0]) / (2 * dl)
+    assert np.allclose(fd, pb.dF_dlam(x, lam), rtol=1e-6, atol=1e-9 * np.abs(pb.dF_dlam(x, lam)).max())
+
+
+def test_adiabatic_equilibria_obey_the_adiabat_and_tend_to_the_isothermal_gas():
+    """Along a trace in C, (p + p_atm) V^gamma = C to solver tolerance; as gamma -> 1 the limit
+    point tends to the isothermal chamber's, the gap falling as gamma - 1."""
+    dead = 1e4 * float(balloon_volume(1.0))          # a reservoir large enough for a snap
+
+    def first_lp(chamber, gamma=1.4):
+        scene = build_scene("balloon", nodes=31, chamber=chamber, gas_volume=dead, gamma=gamma)
+        branch = trace(scene, "gas_amount", until={"stretch_max": 2.0})
+        return branch, branch.limit_points().iloc[0]
+
+    branch, _ = first_lp("adiabatic")
+    t = branch.table
+    law = (t["pressure"] + 0.25) * t["volume"] ** 1.4 / t["gas_amount"] - 1
+    assert np.max(np.abs(law)) < 1e-10 and len(t) > 10
+    assert np.allclose(t["volume"], t["volume_1"] + dead, rtol=1e-12)
+    _, iso = first_lp("gas")
+    gaps = [abs(first_lp("adiabatic", 1.0 + e)[1]["volume_1"] / iso["volume_1"] - 1) for e in (1e-1, 1e-2, 1e-3)]
+    assert gaps[0] > 1e-3                                  # the adiabatic gas is stiffer: a later snap
+    ratios = [gaps[0] / gaps[1], gaps[1] / gaps[2]]
+    assert all(7 < r < 13 for r in ratios), (gaps, ratios)

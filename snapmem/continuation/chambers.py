@@ -6,7 +6,8 @@ with a multiplier (a fluid or a gas, :class:`~snapmem.model.chambers.Chamber`); 
     R(y; p) = 0                                  (each membrane under its chamber's pressure)
     -(V_c(y) - V_c*(p_c)) = 0                    (one per such chamber)
 
-with V_c* the fluid volume (fluid) or the gas' volume n R T / (p_c + p_atm) (gas). They are the
+with V_c* the fluid volume (fluid), the gas' volume n R T / (p_c + p_atm) (gas) or
+(C / (p_c + p_atm))^(1/gamma) (adiabatic gas). They are the
 stationarity conditions of the Lagrangian L(y, p) = sum_i Pi_i(y_i; p) + sum_c p_c V_c*(p_c)
 - E*_c(p_c): the Jacobian
 
@@ -24,7 +25,7 @@ singular exactly where the energy's Hessian is, and its null vector is that Hess
 pressure change it carries), so critical points are located and branches switched on J.
 
 Controls: ``volume`` (the fluid chamber's volume [m^3]), ``gas_amount`` (n R T of the gas chamber
-[J]), ``pressure`` (a prescribed-pressure chamber's pressure [Pa]) and ``voltage_1``, ... (a
+[J], or the adiabat's C = P V^gamma of an adiabatic one), ``pressure`` (a prescribed-pressure chamber's pressure [Pa]) and ``voltage_1``, ... (a
 membrane's voltage [V]).
 """
 
@@ -83,7 +84,8 @@ class ChamberProblem(LoadProblem):
         self.controlled = None
         kind = {"volume": ChamberKind.VOLUME, "gas_amount": ChamberKind.GAS, "pressure": ChamberKind.PRESSURE}
         if control in kind:
-            found = [c for c, ch in enumerate(scene.chambers) if ch.kind is kind[control]]
+            found = [c for c, ch in enumerate(scene.chambers) if ch.kind is kind[control]
+                     or (control == "gas_amount" and ch.is_gas)]
             if not found:
                 raise SnapmemError(f"control = {control!r}: scene {scene.name!r} has no {kind[control].value} "
                                    f"chamber (it has {[ch.kind.value for ch in scene.chambers]})")
@@ -103,8 +105,10 @@ class ChamberProblem(LoadProblem):
         q0 = self._reference = scene.reference_state()
         v0 = abs(scene.chamber_volume(q0, self.controlled)) if self.controlled is not None else 0.0
         v0 = v0 if v0 > 0 else L ** 3
-        self.lam_scale = {"volume": 10.0 * v0, "pressure": self.p_scale,
-                          "gas_amount": 10.0 * v0 * self.p_scale}.get(control, None)
+        exponent = scene.chambers[self.controlled].exponent if self.controlled is not None else 1.0
+        self.lam_scale = {"volume": 10.0 * v0, "pressure": self.p_scale,      # (an adiabat's C: P V^gamma)
+                          "gas_amount": 10.0 * (v0 if exponent == 1.0 else v0 ** exponent) * self.p_scale
+                          }.get(control, None)
         if self.lam_scale is None:        # a voltage
             self.lam_scale = scene.thickness * np.sqrt(scene.mu / (scene.permittivity or 1.0))
         # the fixed fluid volumes and gas amounts (None: as at the start, set by `unknowns`)
@@ -112,7 +116,7 @@ class ChamberProblem(LoadProblem):
                           else scene.chambers[c].amount) for c in self.multiplied}
 
     def _allowed(self):
-        kinds = {ch.kind for ch in self.scene.chambers}
+        kinds = {ChamberKind.GAS if ch.is_gas else ch.kind for ch in self.scene.chambers}
         out = [c for c, k in (("volume", ChamberKind.VOLUME), ("gas_amount", ChamberKind.GAS),
                               ("pressure", ChamberKind.PRESSURE)) if k in kinds]
         return out + [k for k in self.scene.loads if k.startswith("voltage_")]
@@ -147,8 +151,10 @@ class ChamberProblem(LoadProblem):
                                "is not set; start the trace from a state, or set it")
         if ch.kind is ChamberKind.VOLUME:
             return value, 0.0, 1.0
-        v = gas_volume(pressure, value, ch.p_atm)
-        return v, -gas_compliance(pressure, value, ch.p_atm), 1.0 / (pressure + ch.p_atm)
+        gamma = ch.exponent
+        v = gas_volume(pressure, value, ch.p_atm, gamma)
+        dv_damount = 1.0 / (pressure + ch.p_atm) if gamma == 1.0 else v / (gamma * value)
+        return v, -gas_compliance(pressure, value, ch.p_atm, gamma), dv_damount
 
     def evaluate(self, x, lam, order=2, with_floor=False):
         sc = self.scene
@@ -184,8 +190,10 @@ class ChamberProblem(LoadProblem):
         if why is None:
             for c in self.multiplied:
                 ch = self.scene.chambers[c]
-                if ch.kind is ChamberKind.GAS and not loads[self.scene.pressure_name(c)] + ch.p_atm > 0:
+                if ch.is_gas and not loads[self.scene.pressure_name(c)] + ch.p_atm > 0:
                     return f"chamber {c + 1}: absolute gas pressure not positive"
+                if ch.kind is ChamberKind.ADIABATIC and not self.scene.chamber_volume(q, c) > 0:
+                    return f"chamber {c + 1}: the gas volume is not positive"
         return why
 
     # ----------------------------------------------------------------------------------------
@@ -222,20 +230,21 @@ class ChamberProblem(LoadProblem):
         out.update({k: v for k, v in loads.items() if k.startswith("pressure_") or k.startswith("voltage_")})
         out.update(sc.measures(q, loads))
         for c, ch in enumerate(sc.chambers):
-            if ch.kind is ChamberKind.GAS:
+            if ch.is_gas:
                 amount = lam if c == self.controlled else self.fixed[c]
                 out["gas_amount" if c == 0 else f"gas_amount_{c + 1}"] = float(amount)
         return out
 
     def unknowns(self, q, loads) -> tuple:
         """(x, lam) of a full state q under ``loads``; fluid volumes and gas amounts not yet set are
-        taken from the state (a fluid's volume V_c(q), a gas' amount (p_c + p_atm) V_c(q))."""
+        taken from the state (a fluid's volume V_c(q), a gas' amount (p_c + p_atm) V_c(q)^gamma)."""
         sc = self.scene
         held = {}
         for c in self.multiplied:
             ch = sc.chambers[c]
             v = sc.chamber_volume(q, c)
-            held[c] = v if ch.kind is ChamberKind.VOLUME else (loads[sc.pressure_name(c)] + ch.p_atm) * v
+            held[c] = v if ch.kind is ChamberKind.VOLUME else (loads[sc.pressure_name(c)] + ch.p_atm) * (
+                v if ch.exponent == 1.0 else v ** ch.exponent)
             if c != self.controlled and self.fixed[c] is None:
                 self.fixed[c] = held[c]
         lam = loads[self.load] if self.load is not None else held[self.controlled]
@@ -289,7 +298,7 @@ class ChamberProblem(LoadProblem):
             return self.base.get(self.load, 0.0)
         ch = self.scene.chambers[self.controlled]
         v = self.scene.chamber_volume(self._reference, self.controlled)
-        return v if ch.kind is ChamberKind.VOLUME else ch.p_atm * v
+        return v if ch.kind is ChamberKind.VOLUME else ch.p_atm * v ** ch.exponent
 
     def mirrored_point(self, p, perm: np.ndarray):
         """The exchange image of a point: state, tangent and eigenvectors permuted by ``perm``
