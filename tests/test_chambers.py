@@ -220,3 +220,52 @@ def test_adiabatic_equilibria_obey_the_adiabat_and_tend_to_the_isothermal_gas():
     assert gaps[0] > 1e-3                                  # the adiabatic gas is stiffer: a later snap
     ratios = [gaps[0] / gaps[1], gaps[1] / gaps[2]]
     assert all(7 < r < 13 for r in ratios), (gaps, ratios)
+
+
+# ---------------------------------------------------------------------------------------------
+# the balloon on a gas reservoir: the snap's cusp in the reservoir's size
+@pytest.fixture(scope="module")
+def pressure_branches():
+    """The plain balloon traced in pressure past its pressure minimum, at N = 51 and 101."""
+    return {n: trace(build_scene("balloon", nodes=n), "pressure", until={"stretch": 3.2}) for n in (51, 101)}
+
+
+def test_reservoir_cusp_is_the_exact_one_converging_as_N_minus_2(pressure_branches):
+    """The smallest reservoir with a snap (the limit points of the gas amount merge) against the
+    exact 1-DOF balloon (snapmem.reference.gas_balloon), isothermal and adiabatic."""
+    from snapmem.continuation.chambers import reservoir_folds
+    from snapmem.reference.gas_balloon import cusp
+    for gamma in (1.0, 1.4):
+        exact = cusp(gamma=gamma)
+        errors = [abs(reservoir_folds(pressure_branches[n], 0.25, gamma)["cusp"]["reservoir"] / exact["reservoir"] - 1)
+                  for n in (51, 101)]
+        assert errors[1] < 5e-4, errors
+        order = np.log(errors[0] / errors[1]) / np.log(100 / 50)
+        assert 1.8 < order < 2.2, (gamma, errors, order)
+    assert cusp(gamma=1.4)["reservoir"] / cusp()["reservoir"] == pytest.approx(1.4, rel=0.01)   # ~ gamma
+
+
+def test_gas_chamber_snaps_only_above_the_cusp_at_the_pressure_branch_limit_points(pressure_branches):
+    """The gas-reservoir balloon traced in its gas amount: below the cusp's reservoir no limit
+    point and stable throughout (as under volume control); above it the two limit points (the
+    amount's maximum and minimum) are those the pressure branch gives (reservoir_limit_points) on
+    the same mesh to 1e-7, and they approach the pressure maximum and minimum as the reservoir grows."""
+    from snapmem.continuation.chambers import reservoir_folds, reservoir_limit_points
+    branch = pressure_branches[51]
+    found = reservoir_folds(branch, 0.25)["cusp"]
+    pressure_extrema = [float(v) for v in branch.points["pressure"].iloc[:2]]
+    gaps = []
+    for ratio in (0.9, 1.5, 6.0):
+        reservoir = ratio * found["reservoir"]
+        scene = build_scene("balloon", nodes=51, chamber="gas", gas_volume=reservoir)
+        t = trace(scene, "gas_amount", until={"stretch_max": 3.0})
+        lps = t.limit_points()
+        if ratio < 1:
+            assert lps.empty and (t.table["negative_eigs"] == 0).all()
+            continue
+        pair = reservoir_limit_points(branch, reservoir, 0.25, cusp=found)
+        assert list(lps["pressure"]) == pytest.approx([q["pressure"] for q in pair], rel=1e-7)
+        assert list(lps["volume_1"]) == pytest.approx([q["volume"] for q in pair], rel=1e-7)
+        assert lps["control"].iloc[0] > lps["control"].iloc[1]          # a maximum, then a minimum of the amount
+        gaps.append(max(abs(lps["pressure"].iloc[k] / pressure_extrema[k] - 1) for k in range(2)))
+    assert gaps[1] < 0.5 * gaps[0], gaps

@@ -316,3 +316,138 @@ def _chamber_problem(scene, control):
 
 
 PROBLEM_FACTORIES.append(_chamber_problem)
+
+
+# ----------------------------------------------------------------------------------------------
+# the limit points of a gas chamber's amount as its reservoir's volume varies
+def reservoir_at_fold(pb, p, p_atm: float, gamma: float = 1.0) -> float:
+    """The reservoir volume V_d [m^3] for which point ``p`` of a branch traced in the pressure of a
+    single chamber is a limit point of the gas amount (inf where there is none).
+
+    The membranes feel only the chamber's pressure, so a gas chamber's equilibria are the
+    pressure-controlled ones with A = P (V + V_d)^gamma (P = p + p_atm, V the membranes' volume).
+    Along the branch dA = 0 where (V + V_d) dp + gamma P dV = 0:
+
+        V_d = -gamma P (dV/ds) / (dp/ds) - V,
+
+    with dp/ds the tangent's parameter part and dV/ds = -dR/dp . dx/ds (the pressure's work is
+    -p V). So the branch parametrises the curve of the gas amount's limit points in V_d exactly
+    on the mesh (the discrete model's own relation, no approximation)."""
+    if p.tangent is None:
+        raise SnapmemError("reservoir_at_fold: the point has no tangent")
+    dp = float(p.tangent[-1])
+    dV = -float(pb.dF_dlam(p.x, p.lam) @ p.tangent[:-1])
+    volume = float(pb.point_measures(p)["volume"])
+    if dp == 0.0 or not dV * dp < 0.0:
+        return float("inf")
+    return -gamma * (p.lam + p_atm) * dV / dp - volume
+
+
+def reservoir_folds(branch, p_atm: float, gamma: float = 1.0, tol: float = 1e-12) -> dict:
+    """The curve of the gas amount's limit points in the reservoir volume, from a branch traced in
+    the chamber's pressure (``branch.control`` = 'pressure'; :func:`reservoir_at_fold`), and its cusp.
+
+    Parameters
+    ----------
+    branch : Branch
+        Traced in pressure through the falling part of its pressure curve (past its pressure
+        maximum and minimum, e.g. the balloon to stretch 3).
+    p_atm : float
+        Ambient absolute pressure [Pa].
+    gamma : float
+        1 for an isothermal gas, the adiabatic exponent for an adiabatic one.
+    tol : float
+        Relative tolerance in arclength of the cusp's location.
+
+    Returns
+    -------
+    dict
+        ``curve``: pandas.DataFrame, one row per branch point with a limit point (s, pressure,
+        volume, the scene's measures, ``reservoir`` V_d [m^3], ``amount`` P (V + V_d)^gamma, ``side``
+        'max' before the cusp (the amount's maximum: the snap) or 'min' after it (the snap back));
+        ``cusp``: the same quantities at the smallest V_d, located by Brent's method on the branch
+        between its neighbours (corrector at each trial arclength): below that reservoir the gas
+        amount has no limit point, no snap.
+    """
+    import pandas as pd
+    from scipy.optimize import minimize_scalar
+
+    fold = _ReservoirFolds(branch, p_atm, gamma)
+    k = fold.smallest
+    base, span = fold.states[k - 1], fold.states[k + 1].s - fold.states[k - 1].s
+    found = minimize_scalar(lambda s: fold.reservoir(fold.at(base, s)), bounds=(0.0, span),
+                            method="bounded", options={"xatol": tol * max(span, 1.0)})
+    cusp_point = fold.at(base, float(found.x))
+    rows = [fold.row(fold.states[i], "max" if fold.states[i].s < cusp_point.s else "min") for i in fold.finite]
+    return {"curve": pd.DataFrame(rows), "cusp": fold.row(cusp_point, "cusp")}
+
+
+def reservoir_limit_points(branch, reservoir: float, p_atm: float, gamma: float = 1.0, cusp: dict | None = None) -> list:
+    """[max, min]: the gas amount's two limit points on a reservoir of ``reservoir`` [m^3] (the
+    snap and the snap back), as rows of :func:`reservoir_folds`' curve, located on the pressure
+    branch ``branch`` by Brent's method (to 1e-12 in V_d) on either side of the cusp; [] below the
+    cusp's reservoir (no snap). ``cusp``: :func:`reservoir_folds`' cusp, if already found."""
+    from scipy.optimize import brentq
+
+    cusp = reservoir_folds(branch, p_atm, gamma)["cusp"] if cusp is None else cusp
+    if not reservoir > cusp["reservoir"]:
+        return []
+    fold = _ReservoirFolds(branch, p_atm, gamma)
+    s_cusp = cusp["s"]
+    out = []
+    for side in ("max", "min"):
+        # consecutive branch points (or a point and the cusp) with V_d on either side of ``reservoir``
+        ends = [(fold.states[i].s, fold.values[i], fold.states[i]) for i in fold.finite]
+        ends = [e for e in ends if (e[0] < s_cusp) == (side == "max")]
+        ends = sorted(ends + [(s_cusp, cusp["reservoir"], None)], key=lambda e: e[0])
+        pairs = [(a, b) for a, b in zip(ends[:-1], ends[1:]) if (a[1] - reservoir) * (b[1] - reservoir) < 0]
+        if not pairs:
+            raise SnapmemError(f"reservoir_limit_points: reservoir = {reservoir:g} is beyond the branch's {side} "
+                               "side (trace the pressure branch closer to its extrema)")
+        (s_a, _, point_a), (s_b, _, _) = pairs[0]
+        base = point_a if point_a is not None else max((fold.states[i] for i in fold.finite
+                                                        if fold.states[i].s <= s_a), key=lambda p: p.s)
+        s = brentq(lambda t: fold.reservoir(fold.at(base, t)) - reservoir, s_a - base.s, s_b - base.s,
+                   xtol=1e-12 * max(s_b - s_a, 1e-300))
+        out.append(fold.row(fold.at(base, s), side))
+    return out
+
+
+class _ReservoirFolds:
+    """The pressure branch's points and :func:`reservoir_at_fold` along it, with the corrector to
+    reach any arclength between them."""
+
+    def __init__(self, branch, p_atm: float, gamma: float):
+        from snapmem.continuation.options import ContinuationOptions
+        from snapmem.continuation.problems import make_problem
+        from snapmem.continuation.tracer import Tracer
+
+        if branch.control != "pressure":
+            raise SnapmemError(f"reservoir folds: the branch is traced in {branch.control!r}; trace it in 'pressure'")
+        self.p_atm, self.gamma = p_atm, gamma
+        self.pb = make_problem(branch.scene, "pressure")
+        self.states = [p for p in branch.states if p.tangent is not None]
+        self.values = np.array([self.reservoir(p) for p in self.states])
+        self.finite = [int(i) for i in np.flatnonzero(np.isfinite(self.values))]
+        if len(self.finite) < 3:
+            raise SnapmemError("reservoir folds: the branch has no falling part of its pressure curve "
+                               "(trace it past the pressure maximum)")
+        self.smallest = min(self.finite, key=lambda i: self.values[i])
+        if self.smallest in (self.finite[0], self.finite[-1]):
+            raise SnapmemError("reservoir folds: the smallest reservoir is at an end of the falling part; trace further")
+        self.tracer = Tracer(self.pb, ContinuationOptions(), branch.scene)
+
+    def reservoir(self, p) -> float:
+        return reservoir_at_fold(self.pb, p, self.p_atm, self.gamma)
+
+    def at(self, base, s):
+        """The branch's point at arclength s past ``base``, with its tangent."""
+        point, _ = self.tracer.point_at(base, s, tangent=True, precise=False, stability=False)
+        return point
+
+    def row(self, p, side: str) -> dict:
+        reservoir = self.reservoir(p)
+        m = self.pb.point_measures(p)
+        return {"s": p.s, "pressure": p.lam, **{k: v for k, v in m.items() if k != "pressure"},
+                "reservoir": reservoir, "amount": (p.lam + self.p_atm) * (m["volume"] + reservoir) ** self.gamma,
+                "side": side}
