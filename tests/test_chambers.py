@@ -269,3 +269,22 @@ def test_gas_chamber_snaps_only_above_the_cusp_at_the_pressure_branch_limit_poin
         assert lps["control"].iloc[0] > lps["control"].iloc[1]          # a maximum, then a minimum of the amount
         gaps.append(max(abs(lps["pressure"].iloc[k] / pressure_extrema[k] - 1) for k in range(2)))
     assert gaps[1] < 0.5 * gaps[0], gaps
+
+
+@pytest.mark.slow
+def test_gas_balloon_study_quick(tmp_path):
+    """studies/gas_balloon.py --quick: the cusp converges at order 2 and the gas-chamber traces'
+    limit points equal the pressure branch's."""
+    import importlib.util
+    from pathlib import Path
+    import pandas as pd
+    path = Path(__file__).resolve().parents[1] / "studies" / "gas_balloon.py"
+    spec = importlib.util.spec_from_file_location("gas_balloon_study", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main(["--quick", "--out", str(tmp_path)])
+    cusps = pd.read_csv(tmp_path / "gas_balloon.csv")
+    assert np.all((cusps["reservoir_order"].dropna() > 1.9) & (cusps["reservoir_order"].dropna() < 2.1))
+    curve = pd.read_csv(tmp_path / "gas_balloon.curve.csv").dropna(subset=["traced_pressure"])
+    assert len(curve) == 4 and np.allclose(curve["traced_pressure"], curve["pressure"], rtol=1e-7)
+    assert (tmp_path / "gas_balloon.png").exists()

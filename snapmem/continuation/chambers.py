@@ -397,20 +397,24 @@ def reservoir_limit_points(branch, reservoir: float, p_atm: float, gamma: float 
     out = []
     for side in ("max", "min"):
         # consecutive branch points (or a point and the cusp) with V_d on either side of ``reservoir``
-        ends = [(fold.states[i].s, fold.values[i], fold.states[i]) for i in fold.finite]
+        ends = [(fold.states[i].s, fold.values[i], fold.states[i]) for i in fold.bracketing]
         ends = [e for e in ends if (e[0] < s_cusp) == (side == "max")]
         ends = sorted(ends + [(s_cusp, cusp["reservoir"], None)], key=lambda e: e[0])
-        pairs = [(a, b) for a, b in zip(ends[:-1], ends[1:]) if (a[1] - reservoir) * (b[1] - reservoir) < 0]
+        pairs = [(a, b) for a, b in zip(ends[:-1], ends[1:]) if (a[1] > reservoir) != (b[1] > reservoir)]
         if not pairs:
             raise SnapmemError(f"reservoir_limit_points: reservoir = {reservoir:g} is beyond the branch's {side} "
                                "side (trace the pressure branch closer to its extrema)")
         (s_a, _, point_a), (s_b, _, _) = pairs[0]
-        base = point_a if point_a is not None else max((fold.states[i] for i in fold.finite
+        base = point_a if point_a is not None else max((fold.states[i] for i in fold.bracketing
                                                         if fold.states[i].s <= s_a), key=lambda p: p.s)
-        s = brentq(lambda t: fold.reservoir(fold.at(base, t)) - reservoir, s_a - base.s, s_b - base.s,
+        s = brentq(lambda t: min(fold.reservoir(fold.at(base, t)), _FAR) - reservoir, s_a - base.s, s_b - base.s,
                    xtol=1e-12 * max(s_b - s_a, 1e-300))
         out.append(fold.row(fold.at(base, s), side))
     return out
+
+
+#: V_d [m^3] standing for "no finite reservoir" (at and beyond the pressure extrema) in root brackets.
+_FAR = 1e300
 
 
 class _ReservoirFolds:
@@ -432,6 +436,10 @@ class _ReservoirFolds:
         if len(self.finite) < 3:
             raise SnapmemError("reservoir folds: the branch has no falling part of its pressure curve "
                                "(trace it past the pressure maximum)")
+        # the falling part with its neighbours (the pressure extrema, where V_d -> inf) as bracket ends
+        first, last = max(self.finite[0] - 1, 0), min(self.finite[-1] + 1, len(self.states) - 1)
+        self.bracketing = list(range(first, last + 1))
+        self.values = np.minimum(self.values, _FAR)
         self.smallest = min(self.finite, key=lambda i: self.values[i])
         if self.smallest in (self.finite[0], self.finite[-1]):
             raise SnapmemError("reservoir folds: the smallest reservoir is at an end of the falling part; trace further")
