@@ -288,3 +288,25 @@ def test_gas_balloon_study_quick(tmp_path):
     curve = pd.read_csv(tmp_path / "gas_balloon.curve.csv").dropna(subset=["traced_pressure"])
     assert len(curve) == 4 and np.allclose(curve["traced_pressure"], curve["pressure"], rtol=1e-7)
     assert (tmp_path / "gas_balloon.png").exists()
+
+
+def test_switching_mirrors_the_second_half_of_an_identical_pair_only(pairs, monkeypatch):
+    """At a BP of two identical balloons the half along -d is the exchange image of the half along
+    +d (marked ``mirrored``, not computed): its limit point equals the computed half's to 1e-10.
+    An unequal pair has no exchange symmetry."""
+    import snapmem.continuation.switching as switching
+    from snapmem.continuation.problems import make_problem
+    scene = build_scene("two_balloons", nodes=51)
+    branch, _ = pairs[51]
+    options = ContinuationOptions(stop_at_first_limit=True, max_steps=200)
+    halves = dict(switch_at(scene, "volume", branch.critical_state(0), options=options))
+    mirrored = halves[-1]
+    assert mirrored.stats["mirror_of"] == 1 and mirrored.table["mirrored"].all() and not halves[1].table["mirrored"].any()
+    monkeypatch.setattr(switching, "_mirror_permutation", lambda *args: None)
+    computed = dict(switch_at(scene, "volume", branch.critical_state(0), options=options))[-1]
+    assert "mirror_of" not in computed.stats
+    a, b = mirrored.limit_points().iloc[0], computed.limit_points().iloc[0]
+    for column in ("control", "pressure", "volume_1", "volume_2", "stretch_1", "stretch_2"):
+        assert a[column] == pytest.approx(b[column], rel=1e-10), column
+    assert make_problem(build_scene("two_balloons", nodes=21, R2=10.2), "volume").exchange() is None
+    assert make_problem(build_scene("two_balloons", nodes=21), "volume").exchange() is not None
