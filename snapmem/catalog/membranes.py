@@ -267,7 +267,8 @@ GAS_PARAMETERS = (
     Parameter("p_atm", 0.25, "Pa", "ambient absolute pressure (chamber = gas; 0.25 mu ~ 1 bar for mu = 0.42 MPa)",
               minimum=0.0, open_min=True),
     Parameter("gas_amount", None, "J", "n R T of the gas when it is not the control (chamber = gas; default: "
-              "p_atm times the reference balloon's and reservoir's volume)", minimum=0.0, open_min=True))
+              "p_atm times the reference balloon's and reservoir's volume; adiabatic: P V^gamma [Pa m^(3 gamma)])",
+              minimum=0.0, open_min=True))
 _GAS_NAMES = tuple(p.name for p in GAS_PARAMETERS)
 
 
