@@ -153,3 +153,160 @@ def test_balloon_on_a_gas_reservoir_is_the_gas_chamber_scene(tmp_path):
     from snapmem.errors import SnapmemError
     with pytest.raises(SnapmemError, match="gas sets the pressure"):
         build_scene("balloon", chamber="gas", pressure=0.01)
+
+
+# ---------------------------------------------------------------------------------------------
+# the adiabatic gas chamber: P V^gamma = C
+def test_adiabatic_energy_gradient_and_hessian_by_finite_differences():
+    """-dE/dV is the gauge pressure C / V^gamma - p_atm and d2E/dV2 the gas' stiffness, by central
+    differences; -dV/dp (the compliance) is its inverse; at gamma = 1 the formulas are the isothermal ones."""
+    from snapmem.model.chambers import gas_compliance, gas_pressure, gas_stiffness, gas_volume
+    amount, p_atm, v = 3.0, 0.25, 7.0
+    for gamma in (1.0, 1.4, 5.0 / 3.0):
+        h = 1e-4 * v
+        E = [gas_energy(v + k * h, amount, p_atm, gamma) for k in (-1, 0, 1)]
+        assert -(E[2] - E[0]) / (2 * h) == pytest.approx(gas_pressure(v, amount, p_atm, gamma), rel=1e-7)
+        assert (E[2] - 2 * E[1] + E[0]) / h ** 2 == pytest.approx(gas_stiffness(v, amount, p_atm, gamma), rel=1e-6)
+        p = gas_pressure(v, amount, p_atm, gamma)
+        assert gas_volume(p, amount, p_atm, gamma) == pytest.approx(v, rel=1e-14)
+        assert gas_compliance(p, amount, p_atm, gamma) == pytest.approx(1 / gas_stiffness(v, amount, p_atm, gamma),
+                                                                       rel=1e-13)
+    near = 1.0 + 2.0 ** -30            # gamma -> 1: E - C / (gamma - 1) tends to the isothermal energy
+    assert gas_energy(v, amount, p_atm, near) - amount / (near - 1) == pytest.approx(gas_energy(v, amount, p_atm),
+                                                                                     abs=1e-5)
+
+
+def test_adiabatic_chamber_jacobian_is_the_residuals_derivative():
+    """The bordered Jacobian J = [[K, -G], [-G^T, -D]] of a balloon on an adiabatic reservoir
+    against central differences of its residual, at a deformed state and a pressure off equilibrium."""
+    from snapmem.continuation.problems import make_problem
+    scene = build_scene("balloon", nodes=21, chamber="adiabatic", gas_volume=2 * float(balloon_volume(1.0)))
+    pb = make_problem(scene, "gas_amount")
+    x = pb.x_of(scene.reference_state(), {"pressure_1": 0.0} if "pressure_1" in scene.loads else None)
+    x = x.copy()
+    x[:-1] *= 1.0 + 0.05 * np.cos(np.arange(x.size - 1))
+    x[-1] = 0.01
+    lam = 0.3 * float(balloon_volume(1.0)) ** 1.4
+    F, J = pb.evaluate(x, lam)
+    dense = J.to_dense()
+    h = 1e-6
+    for j in range(0, x.size, 5):
+        e = np.zeros(x.size)
+        e[j] = h * max(abs(x[j]), 1.0)
+        column = (pb.evaluate(x + e, lam, order=1)[0] - pb.evaluate(x - e, lam, order=1)[0]) / (2 * e[j])
+        assert np.allclose(column, dense[:, j], rtol=1e-5, atol=1e-6 * np.abs(dense).max())
+    dl = 1e-6 * lam
+    fd = (pb.evaluate(x, lam + dl, order=1)[0] - pb.evaluate(x, lam - dl, order=1)[0]) / (2 * dl)
+    assert np.allclose(fd, pb.dF_dlam(x, lam), rtol=1e-6, atol=1e-9 * np.abs(pb.dF_dlam(x, lam)).max())
+
+
+def test_adiabatic_equilibria_obey_the_adiabat_and_tend_to_the_isothermal_gas():
+    """Along a trace in C, (p + p_atm) V^gamma = C to solver tolerance; as gamma -> 1 the limit
+    point tends to the isothermal chamber's, the gap falling as gamma - 1."""
+    dead = 1e4 * float(balloon_volume(1.0))          # a reservoir large enough for a snap
+
+    def first_lp(chamber, gamma=1.4):
+        scene = build_scene("balloon", nodes=31, chamber=chamber, gas_volume=dead, gamma=gamma)
+        branch = trace(scene, "gas_amount", until={"stretch_max": 2.0})
+        return branch, branch.limit_points().iloc[0]
+
+    branch, _ = first_lp("adiabatic")
+    t = branch.table
+    law = (t["pressure"] + 0.25) * t["volume"] ** 1.4 / t["gas_amount"] - 1
+    assert np.max(np.abs(law)) < 1e-10 and len(t) > 10
+    assert np.allclose(t["volume"], t["volume_1"] + dead, rtol=1e-12)
+    _, iso = first_lp("gas")
+    gaps = [abs(first_lp("adiabatic", 1.0 + e)[1]["volume_1"] / iso["volume_1"] - 1) for e in (1e-1, 1e-2, 1e-3)]
+    assert gaps[0] > 1e-3                                  # the adiabatic gas is stiffer: a later snap
+    ratios = [gaps[0] / gaps[1], gaps[1] / gaps[2]]
+    assert all(7 < r < 13 for r in ratios), (gaps, ratios)
+
+
+# ---------------------------------------------------------------------------------------------
+# the balloon on a gas reservoir: the snap's cusp in the reservoir's size
+@pytest.fixture(scope="module")
+def pressure_branches():
+    """The plain balloon traced in pressure past its pressure minimum, at N = 51 and 101."""
+    return {n: trace(build_scene("balloon", nodes=n), "pressure", until={"stretch": 3.2}) for n in (51, 101)}
+
+
+def test_reservoir_cusp_is_the_exact_one_converging_as_N_minus_2(pressure_branches):
+    """The smallest reservoir with a snap (the limit points of the gas amount merge) against the
+    exact 1-DOF balloon (snapmem.reference.gas_balloon), isothermal and adiabatic."""
+    from snapmem.continuation.chambers import reservoir_folds
+    from snapmem.reference.gas_balloon import cusp
+    for gamma in (1.0, 1.4):
+        exact = cusp(gamma=gamma)
+        errors = [abs(reservoir_folds(pressure_branches[n], 0.25, gamma)["cusp"]["reservoir"] / exact["reservoir"] - 1)
+                  for n in (51, 101)]
+        assert errors[1] < 5e-4, errors
+        order = np.log(errors[0] / errors[1]) / np.log(100 / 50)
+        assert 1.8 < order < 2.2, (gamma, errors, order)
+    assert cusp(gamma=1.4)["reservoir"] / cusp()["reservoir"] == pytest.approx(1.4, rel=0.01)   # ~ gamma
+
+
+def test_gas_chamber_snaps_only_above_the_cusp_at_the_pressure_branch_limit_points(pressure_branches):
+    """The gas-reservoir balloon traced in its gas amount: below the cusp's reservoir no limit
+    point and stable throughout (as under volume control); above it the two limit points (the
+    amount's maximum and minimum) are those the pressure branch gives (reservoir_limit_points) on
+    the same mesh to 1e-7, and they approach the pressure maximum and minimum as the reservoir grows."""
+    from snapmem.continuation.chambers import reservoir_folds, reservoir_limit_points
+    branch = pressure_branches[51]
+    found = reservoir_folds(branch, 0.25)["cusp"]
+    pressure_extrema = [float(v) for v in branch.points["pressure"].iloc[:2]]
+    gaps = []
+    for ratio in (0.9, 1.5, 6.0):
+        reservoir = ratio * found["reservoir"]
+        scene = build_scene("balloon", nodes=51, chamber="gas", gas_volume=reservoir)
+        t = trace(scene, "gas_amount", until={"stretch_max": 3.0})
+        lps = t.limit_points()
+        if ratio < 1:
+            assert lps.empty and (t.table["negative_eigs"] == 0).all()
+            continue
+        pair = reservoir_limit_points(branch, reservoir, 0.25, cusp=found)
+        assert list(lps["pressure"]) == pytest.approx([q["pressure"] for q in pair], rel=1e-7)
+        assert list(lps["volume_1"]) == pytest.approx([q["volume"] for q in pair], rel=1e-7)
+        assert lps["control"].iloc[0] > lps["control"].iloc[1]          # a maximum, then a minimum of the amount
+        gaps.append(max(abs(lps["pressure"].iloc[k] / pressure_extrema[k] - 1) for k in range(2)))
+    assert gaps[1] < 0.5 * gaps[0], gaps
+
+
+@pytest.mark.slow
+def test_gas_balloon_study_quick(tmp_path):
+    """studies/gas_balloon.py --quick: the cusp converges at order 2 and the gas-chamber traces'
+    limit points equal the pressure branch's."""
+    import importlib.util
+    from pathlib import Path
+    import pandas as pd
+    path = Path(__file__).resolve().parents[1] / "studies" / "gas_balloon.py"
+    spec = importlib.util.spec_from_file_location("gas_balloon_study", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main(["--quick", "--out", str(tmp_path)])
+    cusps = pd.read_csv(tmp_path / "gas_balloon.csv")
+    assert np.all((cusps["reservoir_order"].dropna() > 1.9) & (cusps["reservoir_order"].dropna() < 2.1))
+    curve = pd.read_csv(tmp_path / "gas_balloon.curve.csv").dropna(subset=["traced_pressure"])
+    assert len(curve) == 4 and np.allclose(curve["traced_pressure"], curve["pressure"], rtol=1e-7)
+    assert (tmp_path / "gas_balloon.png").exists()
+
+
+def test_switching_mirrors_the_second_half_of_an_identical_pair_only(pairs, monkeypatch):
+    """At a BP of two identical balloons the half along -d is the exchange image of the half along
+    +d (marked ``mirrored``, not computed): its limit point equals the computed half's to 1e-10.
+    An unequal pair has no exchange symmetry."""
+    import snapmem.continuation.switching as switching
+    from snapmem.continuation.problems import make_problem
+    scene = build_scene("two_balloons", nodes=51)
+    branch, _ = pairs[51]
+    options = ContinuationOptions(stop_at_first_limit=True, max_steps=200)
+    halves = dict(switch_at(scene, "volume", branch.critical_state(0), options=options))
+    mirrored = halves[-1]
+    assert mirrored.stats["mirror_of"] == 1 and mirrored.table["mirrored"].all() and not halves[1].table["mirrored"].any()
+    monkeypatch.setattr(switching, "_mirror_permutation", lambda *args: None)
+    computed = dict(switch_at(scene, "volume", branch.critical_state(0), options=options))[-1]
+    assert "mirror_of" not in computed.stats
+    a, b = mirrored.limit_points().iloc[0], computed.limit_points().iloc[0]
+    for column in ("control", "pressure", "volume_1", "volume_2", "stretch_1", "stretch_2"):
+        assert a[column] == pytest.approx(b[column], rel=1e-10), column
+    assert make_problem(build_scene("two_balloons", nodes=21, R2=10.2), "volume").exchange() is None
+    assert make_problem(build_scene("two_balloons", nodes=21), "volume").exchange() is not None

@@ -4,7 +4,8 @@
 validation balloon of MODEL.md section 6 by default, radii ``R1`` and ``R2``) joined by a tube,
 so that they share one chamber. The chamber holds an incompressible fluid of prescribed volume
 (``chamber = volume``: trace it with ``--control volume``, the total volume of the two balloons)
-or an isothermal ideal gas (``chamber = gas``: the API's ``gas_amount`` control, n R T [J], with
+or an isothermal ideal gas (``chamber = gas``) or an adiabatic one (``chamber = adiabatic``, exponent
+``gamma``) (the ``gas_amount`` control: n R T [J], or P V^gamma adiabatic, with
 the tube's and reservoir's ``dead_volume`` and the ambient ``p_atm``). The symmetric branch of an
 identical pair loses stability where one balloon's dp/dV = 0 (a BP), and the smaller balloon
 empties into the larger along the asymmetric branch that bifurcates there.
@@ -36,7 +37,7 @@ def _two_balloons(params: dict, with_loads: tuple) -> MultiScene:
     second = balloon_membrane(params, with_loads, params["R2"], "balloon_2")
     kind = ChamberKind(params["chamber"])
     chamber = Chamber(kind, (0, 1), pressure=0.0, dead_volume=params["dead_volume"], p_atm=params["p_atm"],
-                      amount=params["gas_amount"])
+                      amount=params["gas_amount"], gamma=params["gamma"])
     recorded = {**first.parameters, "pressure": 0.0}          # the law as recorded (a law instance by its name)
     return MultiScene([first, second], [chamber], name="two_balloons", parameters=recorded)
 
@@ -46,11 +47,14 @@ register(SceneSpec(
     common_parameters(101, H=0.1)
     + (Parameter("R1", 10.0, "m", "first balloon's radius", minimum=0.0, open_min=True),
        Parameter("R2", 10.0, "m", "second balloon's radius", minimum=0.0, open_min=True),
-       Parameter("chamber", "volume", "", "what fills the shared chamber", str, choices=("volume", "gas")),
+       Parameter("chamber", "volume", "", "what fills the shared chamber: an incompressible fluid, an "
+                 "isothermal gas or an adiabatic one", str, choices=("volume", "gas", "adiabatic")),
+       Parameter("gamma", 1.4, "", "adiabatic exponent c_p / c_v (chamber = adiabatic)", minimum=1.0),
        Parameter("dead_volume", 0.0, "m^3", "tube and reservoir volume (gas chamber)", minimum=0.0),
        Parameter("p_atm", 0.25, "Pa", "ambient absolute pressure (gas chamber; 0.25 mu ~ 1 bar for "
                  "mu = 0.42 MPa)", minimum=0.0, open_min=True),
        Parameter("gas_amount", None, "J", "n R T of the gas when it is not the control (default: "
-                 "p_atm times the reference chamber volume)", minimum=0.0, open_min=True))
+                 "p_atm times the reference chamber volume; adiabatic: P V^gamma [Pa m^(3 gamma)])",
+                 minimum=0.0, open_min=True))
     + tuple(p for p in material_parameters() if p.name != "pressure"),
     _two_balloons))

@@ -260,14 +260,17 @@ def _torus(params, with_loads):
 # the balloon on a gas reservoir: ``balloon --set chamber=gas --set gas_volume=...``
 GAS_PARAMETERS = (
     Parameter("chamber", "pressure", "", "what inflates the balloon: 'pressure' (prescribed) or 'gas' (a "
-              "reservoir of gas_volume holding gas_amount; trace with --control gas_amount)", str,
-              choices=("pressure", "gas")),
+              "reservoir of gas_volume holding gas_amount; trace with --control gas_amount), or 'adiabatic' "
+              "(the same gas compressed adiabatically, P V^gamma = gas_amount)", str,
+              choices=("pressure", "gas", "adiabatic")),
+    Parameter("gamma", 1.4, "", "adiabatic exponent c_p / c_v (chamber = adiabatic)", minimum=1.0),
     Parameter("gas_volume", 0.0, "m^3", "the gas reservoir's (and tubing's) volume besides the balloon "
               "(chamber = gas)", minimum=0.0),
     Parameter("p_atm", 0.25, "Pa", "ambient absolute pressure (chamber = gas; 0.25 mu ~ 1 bar for mu = 0.42 MPa)",
               minimum=0.0, open_min=True),
     Parameter("gas_amount", None, "J", "n R T of the gas when it is not the control (chamber = gas; default: "
-              "p_atm times the reference balloon's and reservoir's volume)", minimum=0.0, open_min=True))
+              "p_atm times the reference balloon's and reservoir's volume; adiabatic: P V^gamma [Pa m^(3 gamma)])",
+              minimum=0.0, open_min=True))
 _GAS_NAMES = tuple(p.name for p in GAS_PARAMETERS)
 
 
@@ -281,11 +284,12 @@ def _with_gas_chamber(pressure_builder):
         if params["chamber"] == "pressure":
             return pressure_builder(own, with_loads)
         if params["pressure"] != 0.0:
-            raise SnapmemError(f"pressure = {params['pressure']:g} with chamber = gas: the gas sets the pressure "
+            raise SnapmemError(f"pressure = {params['pressure']:g} with chamber = {params['chamber']}: "
+                               "the gas sets the pressure "
                                "(set gas_amount, or trace with --control gas_amount)")
         balloon = pressure_builder(own, with_loads)
-        chamber = Chamber(ChamberKind.GAS, (0,), dead_volume=params["gas_volume"], p_atm=params["p_atm"],
-                          amount=params["gas_amount"])
+        chamber = Chamber(ChamberKind(params["chamber"]), (0,), dead_volume=params["gas_volume"],
+                          p_atm=params["p_atm"], amount=params["gas_amount"], gamma=params["gamma"])
         recorded = {**balloon.parameters, **{k: params[k] for k in _GAS_NAMES}}
         return MultiScene([balloon], [chamber], name="balloon", parameters=recorded)
 

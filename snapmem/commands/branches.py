@@ -153,7 +153,9 @@ def _trace_switch(args, scene, control, until, options) -> int:
     for sign, child in halves:
         diagram.add(child)
         print(f"branch {len(diagram.branches) - 1} (direction {sign:+d}): {child.status}; "
-              f"starts at {control} = {child.states[0].lam:.10g}, points: {len(child.table)}")
+              f"starts at {control} = {child.states[0].lam:.10g}, points: {len(child.table)}"
+              + ("; mirrored: the exchange image of the other half (identical membranes), not computed"
+                 if child.stats.get("mirror_of") else ""))
         for _, r in child.points.iterrows():
             print(f"    {r['kind']}: {control} = {r['control']:.10g}  stretch_max = {r['stretch_max']:.6g}")
     if not halves:

@@ -150,8 +150,12 @@ def switch_at(scene, control: str, c: Point, ds: float = 0.02, until=None,
         Fl = pb.dF_dlam(c.x, c.lam)[: phi.size]
         imperfect = abs(phi @ Fl) / (np.linalg.norm(phi) * np.linalg.norm(Fl)) > SYMMETRY_COUPLING
     d, coefficients, fold = bifurcation_direction(tracer, c, phi, imperfect)
+    perm = _mirror_permutation(pb, c, d)
     halves = []
     for sign in (1, -1):
+        if sign == -1 and perm is not None and halves:
+            halves.append((-1, mirror_branch(halves[0][1], pb, perm)))
+            break
         base = Point(c.x, c.lam, tangent=sign * d)
         first, J1 = tracer.correct(base, ds)
         if first is None:
@@ -166,8 +170,47 @@ def switch_at(scene, control: str, c: Point, ds: float = 0.02, until=None,
             continue
         child.stats["switch"] = {"a": coefficients[0], "b": coefficients[1], "c": coefficients[2],
                                  "fold_of_mesh": fold, "sign": sign}
+        if perm is not None:
+            child.table["mirrored"] = False
+            child.points["mirrored"] = False
         halves.append((sign, child))
     return halves
+
+
+def _mirror_permutation(pb, c: Point, d: np.ndarray):
+    """The exchange permutation of the problem's unknowns (its ``exchange``: two identical
+    membranes) if the BP ``c`` is a symmetric state and the direction ``d`` antisymmetric (to
+    1e-8): then the half along -d is the mirror image of the half along +d. Else None."""
+    exchange = getattr(pb, "exchange", None)
+    perm = None if exchange is None else exchange()
+    if perm is None:
+        return None
+    n = c.x.size
+    symmetric = np.max(np.abs(c.x[perm] - c.x)) <= 1e-8 * max(np.max(np.abs(c.x)), 1e-300)
+    antisymmetric = (np.max(np.abs(d[:n][perm] + d[:n])) <= 1e-8 * np.max(np.abs(d[:n]))
+                     and abs(d[-1]) <= 1e-8 * np.max(np.abs(d)))
+    return perm if symmetric and antisymmetric else None
+
+
+def mirror_branch(child: Branch, pb, perm: np.ndarray) -> Branch:
+    """The exchange image of a switched half (two identical membranes): its states permuted by
+    ``perm``, the per-membrane columns ``NAME_1`` and ``NAME_2`` of its tables swapped, everything
+    else (the parameter, the chambers' totals, pressures, eigenvalues, inertia, kinds) equal.
+
+    Not computed: its tables carry ``mirrored`` = True, its ``stats['mirror_of']`` is the sign of
+    the half it is the image of, and its Newton counts are zero."""
+    def swapped(table):
+        out = table.copy()
+        for col in table.columns:
+            if col.endswith("_1") and col[:-2] + "_2" in table.columns:
+                out[col], out[col[:-2] + "_2"] = table[col[:-2] + "_2"].values, table[col].values
+        out["mirrored"] = True
+        return out
+
+    stats = {**child.stats, "newton_iterations": 0, "evaluations": 0, "mirror_of": child.stats["switch"]["sign"],
+             "switch": {**child.stats["switch"], "sign": -child.stats["switch"]["sign"]}}
+    return Branch(child.scene, child.control, swapped(child.table), swapped(child.points), child.rejections.copy(),
+                  child.status, child.outcome, [pb.mirrored_point(p, perm) for p in child.states], stats)
 
 
 def _null_vector(pb, J, c: Point) -> np.ndarray:

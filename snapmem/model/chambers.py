@@ -20,6 +20,16 @@ chamber's energy E_c(V_c) makes the chamber's pressure on its membranes p_c = -d
       E_c(V_c) = -n R T ln(V_c) + p_atm V_c,      p_c = -dE_c/dV_c = n R T / V_c - p_atm,
 
   convex in V_c (d2E_c/dV_c^2 = n R T / V_c^2 > 0): the gas stiffens the chamber.
+- ``adiabatic``: an ideal gas compressed without heat exchange, (p_c + p_atm) V_c^gamma = C
+  (gamma = c_p / c_v > 1, 1.4 for air). Its energy (the gas' internal energy P V / (gamma - 1)
+  with the atmosphere's work) is
+
+      E_c(V_c) = C V_c^(1 - gamma) / (gamma - 1) + p_atm V_c,   p_c = C / V_c^gamma - p_atm,
+
+  convex (d2E_c/dV_c^2 = gamma C / V_c^(gamma + 1) > 0) and stiffer than the isothermal gas at
+  the same state by gamma. The chamber's ``amount`` is C = P V^gamma [Pa m^(3 gamma)], which is
+  n R T at gamma = 1: every formula below takes ``gamma`` (1: isothermal), and tends to the
+  isothermal one as gamma -> 1.
 """
 
 from __future__ import annotations
@@ -37,6 +47,7 @@ class ChamberKind(str, Enum):
     PRESSURE = "pressure"     #: prescribed pressure
     VOLUME = "volume"         #: prescribed incompressible fluid volume (pressure: a multiplier)
     GAS = "gas"               #: isothermal ideal gas of fixed amount n R T
+    ADIABATIC = "adiabatic"   #: ideal gas compressed adiabatically, P V^gamma = C
 
 
 @dataclass(frozen=True)
@@ -56,12 +67,15 @@ class Chamber:
         Fluid volume V_fluid [m^3] (``volume``) when not the continuation parameter; None: as at
         the start.
     amount : float or None
-        n R T [J] of the gas (``gas``) when not the continuation parameter; None: what the reference
-        state holds at gauge pressure 0, p_atm (V_reference + V_dead).
+        n R T [J] of the gas (``gas``), or the adiabat's C = P V^gamma [Pa m^(3 gamma)]
+        (``adiabatic``), when not the continuation parameter; None: what the reference state holds
+        at gauge pressure 0, p_atm (V_reference + V_dead)^gamma.
     dead_volume : float
         V_dead [m^3] >= 0, the tubing's and reservoir's volume.
     p_atm : float
-        Ambient (absolute) pressure [Pa] > 0 (``gas`` only).
+        Ambient (absolute) pressure [Pa] > 0 (``gas`` and ``adiabatic``).
+    gamma : float
+        The adiabatic exponent c_p / c_v >= 1 (``adiabatic`` only; default 1.4, air).
     """
 
     kind: ChamberKind
@@ -72,6 +86,7 @@ class Chamber:
     amount: float | None = None
     dead_volume: float = 0.0
     p_atm: float = 1.0
+    gamma: float = 1.4
 
     def __post_init__(self):
         try:
@@ -91,6 +106,7 @@ class Chamber:
         check_real("pressure", self.pressure)
         check_real("dead_volume", self.dead_volume, minimum=0.0)
         check_real("p_atm", self.p_atm, minimum=0.0, min_inclusive=False)
+        check_real("gamma", self.gamma, minimum=1.0)
         if self.volume is not None:
             check_real("volume", self.volume, minimum=0.0, min_inclusive=False)
         if self.amount is not None:
@@ -101,24 +117,46 @@ class Chamber:
         """Whether the chamber's pressure is an unknown (fluid and gas chambers)."""
         return self.kind is not ChamberKind.PRESSURE
 
+    @property
+    def is_gas(self) -> bool:
+        """Whether a gas fills the chamber (isothermal or adiabatic)."""
+        return self.kind in (ChamberKind.GAS, ChamberKind.ADIABATIC)
 
-def gas_energy(volume: float, amount: float, p_atm: float) -> float:
-    """E = -n R T ln(V) + p_atm V [J] of a gas chamber of volume V [m^3] holding n R T = ``amount`` [J]."""
+    @property
+    def exponent(self) -> float:
+        """The gas law's exponent: P V^exponent = amount (1 isothermal, gamma adiabatic)."""
+        return self.gamma if self.kind is ChamberKind.ADIABATIC else 1.0
+
+
+def gas_energy(volume: float, amount: float, p_atm: float, gamma: float = 1.0) -> float:
+    """E [J] of a gas chamber of volume V [m^3] holding ``amount`` (P V^gamma = amount: n R T [J]
+    at gamma = 1): -amount ln(V) + p_atm V (isothermal, gamma = 1), amount V^(1 - gamma) /
+    (gamma - 1) + p_atm V (adiabatic)."""
     if volume <= 0:
         raise SnapmemError(f"gas chamber volume = {volume:g}: must be > 0")
-    return -amount * math.log(volume) + p_atm * volume
+    if gamma == 1.0:
+        return -amount * math.log(volume) + p_atm * volume
+    return amount * volume ** (1.0 - gamma) / (gamma - 1.0) + p_atm * volume
 
 
-def gas_pressure(volume, amount: float, p_atm: float):
-    """Gauge pressure p = n R T / V - p_atm [Pa] of the gas at chamber volume V [m^3]."""
-    return amount / volume - p_atm
+def gas_pressure(volume, amount: float, p_atm: float, gamma: float = 1.0):
+    """Gauge pressure p = amount / V^gamma - p_atm [Pa] of the gas at chamber volume V [m^3]."""
+    return amount / volume ** gamma - p_atm
 
 
-def gas_volume(pressure, amount: float, p_atm: float):
-    """Chamber volume V = n R T / (p + p_atm) [m^3] of the gas at gauge pressure p [Pa]."""
-    return amount / (pressure + p_atm)
+def gas_volume(pressure, amount: float, p_atm: float, gamma: float = 1.0):
+    """Chamber volume V = (amount / (p + p_atm))^(1 / gamma) [m^3] of the gas at gauge pressure p [Pa]."""
+    ratio = amount / (pressure + p_atm)
+    return ratio if gamma == 1.0 else ratio ** (1.0 / gamma)
 
 
-def gas_compliance(pressure, amount: float, p_atm: float):
-    """-dV/dp = n R T / (p + p_atm)^2 [m^3/Pa] of the gas at gauge pressure p."""
-    return amount / (pressure + p_atm) ** 2
+def gas_compliance(pressure, amount: float, p_atm: float, gamma: float = 1.0):
+    """-dV/dp = V / (gamma (p + p_atm)) [m^3/Pa] of the gas at gauge pressure p."""
+    if gamma == 1.0:
+        return amount / (pressure + p_atm) ** 2
+    return gas_volume(pressure, amount, p_atm, gamma) / (gamma * (pressure + p_atm))
+
+
+def gas_stiffness(volume, amount: float, p_atm: float, gamma: float = 1.0):
+    """d2E/dV^2 = gamma amount / V^(gamma + 1) [Pa/m^3] of the gas at chamber volume V [m^3]."""
+    return gamma * amount / volume ** (gamma + 1.0)
