@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from numpy.polynomial import legendre
 
-from snapmem.catalog.scenes import get_spec
+from snapmem.catalog.scenes import build_scene, get_spec
 from snapmem.continuation import Diagram, read_diagram, trace
 from snapmem.continuation.modes import legendre_mode
 from snapmem.reference.exact import balloon_extrema, balloon_pressure, sphere_bifurcation_stretches
@@ -219,3 +219,17 @@ def test_switching_direction_at_a_transcritical_point():
     assert not fold
     assert a == pytest.approx(2.0, rel=1e-6) and b == pytest.approx(-1.0, rel=1e-6) and abs(cc) < 1e-8
     assert np.allclose(np.abs(d), [2 ** -0.5, 0.0, 2 ** -0.5], atol=1e-6) and d[0] * d[2] > 0
+
+
+def test_a_slack_start_locates_no_critical_point_from_its_rounding_eigenvalue():
+    """The voltage-loaded torus at p = 0 carries no tension, so K at the start is singular and its
+    eigenvalue nearest zero is rounding: -1.8e-10 at E_hat = 0.1538, N = 200 (+6e-11 at the other
+    E_hat of Fig. 5a). Its sign used to count as an unstable start and put a BP at p = 4.7e-12.
+    The start's inertia is undetermined (negative_eigs -1); the first critical point is the LP."""
+    scene = build_scene("torus", nodes=200, E_hat=0.1538, with_loads=("voltage",))
+    branch = trace(scene, "pressure", until={"u_max": 10.0})
+    table = branch.table
+    assert table["negative_eigs"].iloc[0] == -1 and table["negative_eigs"].iloc[1] == 0
+    kinds = table.loc[table["point"] != "", "point"].tolist()
+    assert kinds[0] == "LP"
+    assert abs(table.loc[table["point"] == "LP", "pressure"].iloc[0] - 0.0391602) < 1e-6

@@ -110,6 +110,8 @@ class CriticalPoints(Event):
 
     def check(self, step: Step) -> Found | None:
         previous, new = step.previous, step.new
+        if previous.negative is None:          # a start whose inertia rounding leaves undetermined
+            return None
         if new.negative != previous.negative:
             return Found([locate_critical(step.tracer, previous, new)])
         if len(step.points) >= 2:

@@ -215,6 +215,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     if np.max(np.abs(F)) > 1e3 * tracer.tol:
         raise SolverError(f"start state is not an equilibrium (max |R| = {np.max(np.abs(F)):.3e})")
     first = tracer.finish(Point(x0, lam0), J, None if toward is None else Point(x0, lam0, tangent=toward))
+    _forget_rounding_inertia(first, pb.stiffness(J))
     points = [first]
     rejections = []
     critical = []
@@ -234,7 +235,8 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
             angle = math.acos(max(-1.0, min(1.0, tracer.inner(base.tangent, p.tangent))))
             if angle > options.max_angle and ds > options.ds_min:
                 reason = f"tangent turned by {angle:.3f} rad > max_angle"
-            elif (options.stability and abs(p.negative - base.negative) >= 2 and ds > options.ds_min):
+            elif (options.stability and base.negative is not None and abs(p.negative - base.negative) >= 2
+                  and ds > options.ds_min):
                 reason = f"negative eigenvalue count jumped {base.negative} -> {p.negative}: may straddle two critical points"
         if reason is not None:
             rejections.append({"step": step, "s": base.s, "ds": ds, "reason": reason})
@@ -316,6 +318,20 @@ def snap_by_tracing(scene: Scene, last: Equilibrium, name: str, value: float) ->
     eq = solve(scene, loads, q0=q)
     eq.report.iterations += branch.stats["newton_iterations"]
     return eq if eq.converged else None
+
+
+#: An eigenvalue within this fraction of the stiffness' largest diagonal entry is rounding: its sign,
+#: and so the inertia, says nothing (about 1e5 times the rounding of an LDL^T pivot).
+ROUNDING_EIGENVALUE = 1e-8
+
+
+def _forget_rounding_inertia(first: Point, K) -> None:
+    """At a start on a singular state (a slack membrane at rest: no tension, so K has a null
+    vector) the eigenvalue nearest zero is rounding, of either sign. Its count is then undetermined
+    (``negative`` None: ``negative_eigs`` -1 and ``stable`` empty in the table), and no critical point
+    is located between the start and the first step, where the count is exact again."""
+    if first.eigs is not None and first.eigs.size and abs(float(first.eigs[0])) <= ROUNDING_EIGENVALUE * scale_of(K):
+        first.negative = None
 
 
 def _assemble(scene, control, pb, points, critical, rejections, status, outcome, tracer) -> Branch:
