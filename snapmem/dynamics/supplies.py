@@ -172,7 +172,7 @@ class ChamberState:
             if resistance is None or not resistance > 0:
                 raise SnapmemError(f"flow_resistance{s} = {resistance}: chamber {c + 1} is fed through a "
                                    "resistance (source_pressure is a load); give flow_resistance > 0 [Pa s/m^3]")
-            anchor, step = self._anchors[c]
+            anchor, step, _ = self._anchors[c]
             p_source = loads["source_pressure" + s]
             return lambda p: (anchor + step * (p_source - p) / resistance, step / resistance)
         volume = loads.get("fluid_volume" + s, self.held[c])
@@ -322,6 +322,11 @@ class ChamberRecorder(_Recorder):
         names = sorted({name for each in loads for name in each})
         for name in names:
             data["load_" + name] = np.array([each.get(name, np.nan) for each in loads])
+        for c, ch in enumerate(scene.chambers):      # a gas' pressure: its law at the frame's own state
+            if ch.kind is ChamberKind.GAS:
+                amount = [each.get("gas_amount" + _suffix(c), self.chambers.held[c]) for each in loads]
+                volume = np.array([scene.chamber_volume(q, c) for q in data["q"]])
+                data["load_" + scene.pressure_name(c)] = np.array(amount) / volume - ch.p_atm
         for i, m in enumerate(scene.membranes):
             part = slice(scene.offsets[i], scene.offsets[i + 1])
             Q = data["q"][:, part]
