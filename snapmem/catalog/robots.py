@@ -242,6 +242,8 @@ def events(traj: Trajectory) -> dict:
     name = traj.meta.get("scene", "")
     if name in ("ball_drop", "ball_throw"):
         return _ball_events(traj, name)
+    if name == "pump2":
+        return pump2_events(traj)
     kinetic = traj["kinetic"]
     out = {}
     if name == "pump":
@@ -347,3 +349,10 @@ def _extremum(t, y, where, lowest: bool):
         return float(t1), float(y1)
     tm = t1 - b / (2 * c)
     return float(tm), float(y1 - b * b / (4 * c))
+
+
+# ------------------------------------------------------------------------------------------
+# pump2 (snapmem.catalog.pump2: the scene, its experiment and events)
+from snapmem.catalog.pump2 import pump2_events, pump2_experiment  # noqa: E402
+
+EXPERIMENTS["pump2"] = pump2_experiment
