@@ -163,3 +163,22 @@ def test_a_chamber_cannot_be_both_prescribed_and_fed():
         simulate(scene, {"source_pressure": 0.01}, t_end=1.0)
     with pytest.raises(SnapmemError, match="no such load"):
         simulate(scene, {"gas_amount": 1.0}, t_end=1.0)
+
+
+def test_pump2_snaps_at_the_active_plates_limit_pressure_and_pumps_into_the_passive_plate():
+    from snapmem.catalog.robots import events, run
+    traj = run("pump2")
+    assert traj.meta["status"] == "completed"
+    found = events(traj)
+    p = traj.meta["parameters"]
+    assert p["t_up"] < found["snap"] < p["t_hold"] and found["snap_back"] > p["t_down"]
+    # the passive plate is far more compliant than the active plate's falling branch is steep, so
+    # the pair snaps just past the active plate's limit point at 300 V (79.9 Pa, pump_prestretch.csv)
+    assert found["snap_pressure"] == pytest.approx(79.906, rel=5e-3)
+    # what the active plate gives up when the voltage goes off, the passive one takes (one fluid)
+    t, V2 = traj["t"], traj["volume_2"]
+    gained = float(np.diff(np.interp([p["t_hold"], p["t_down"]], t, V2))[0])
+    assert gained == pytest.approx(found["pumped_volume"], rel=1e-6)
+    assert found["pumped_volume"] > 0.05                                 # [m^3]
+    silent = events(run("pump2", voltage=0.0, t_end=16.0))                # no voltage: nothing to pump
+    assert math.isnan(silent["snap"])
