@@ -98,9 +98,9 @@ def draw(summary: pd.DataFrame, cycles: pd.DataFrame, path) -> None:
     window_ax.set_title("volume pumped per cycle against voltage")
     window_ax.set_xlabel(r"voltage $\phi$ [V]")
     window_ax.tick_params(labelbottom=True)
-    volume_ax.legend(loc="upper left", bbox_to_anchor=(0.0, -1.02), fontsize=8, frameon=False)
     window_ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize=8)
-    empty.axis("off")
+    empty.axis("off")                 # the cycles' key, beside the pressure panel they share
+    empty.legend(*volume_ax.get_legend_handles_labels(), loc="center left", fontsize=8, frameon=False)
     style.save(fig, path)
 
 
@@ -114,6 +114,13 @@ def convergence(default_traj) -> pd.DataFrame:
     for name, traj in (("real_time_factor", default_traj), ("tight_real_time_factor", tight)):
         rows.append({"event": name, "value": traj.meta["t_end"] / traj.meta["wall_time"]})
     return pd.DataFrame(rows)
+
+
+def redraw(folder) -> None:
+    """Draw pump2.png again from the CSVs in ``folder``."""
+    from pathlib import Path
+    folder = Path(folder)
+    draw(pd.read_csv(folder / "pump2.csv"), pd.read_csv(folder / "pump2.cycles.csv"), folder / "pump2.png")
 
 
 def main(argv=None):
