@@ -86,32 +86,30 @@ def fluid_schedule(params: dict, volume0: float) -> list:
     return [(0.0, volume0), (t_up, volume0), (t_hold, top), (t_down, top), (t_down + (t_hold - t_up), volume0)]
 
 
-def pump2_experiment(scene: MultiScene):
-    """The ``pump2`` experiment (module docstring): Euler, as the ``pump``'s (its numerical damping
-    carries the snap back through the slack cap)."""
-    from snapmem.catalog.robots import Experiment, _options
-    from snapmem.dynamics.loads import schedule
+def pump2_loads(scene: MultiScene) -> tuple:
+    """(the loads' schedule spec {name: [(t, value)]}, the start state) of the ``pump2`` experiment
+    (module docstring); :mod:`snapmem.catalog.robots` makes the experiment of them (Euler, as the
+    ``pump``'s: its numerical damping carries the snap back through the slack cap)."""
     p = scene.parameters
     q0 = start_state(scene)
     phi = p["voltage"] if p["voltage"] is not None else 300.0
-    loads = schedule(fluid_volume=fluid_schedule(p, scene.volume(q0)),
-                     voltage_1=[(0.0, phi), (p["t_hold"], phi), (p["t_hold"] + p["t_switch"], 0.0)])
-    return Experiment(scene, loads, p["t_end"], p["rho"], p["xi"], q0=q0,
-                      options=_options(p, dt=1e-3, dt_max=0.5, scheme="euler"))
+    return ({"fluid_volume": fluid_schedule(p, scene.volume(q0)),
+             "voltage_1": [(0.0, phi), (p["t_hold"], phi), (p["t_hold"] + p["t_switch"], 0.0)]}, q0)
 
 
-def pump2_events(traj) -> dict:
+def pump2_events(traj, snap_of) -> dict:
     """``snap``, ``snap_back`` [s], ``pumped_volume`` [m^3] and ``snap_pressure`` [Pa] of a pump2 run
-    (module docstring); NaN where the event did not happen (a snap: as the pump's, a jump out of a
-    quiet state with a burst of kinetic energy, :func:`snapmem.catalog.robots._snap`)."""
-    from snapmem.catalog.robots import _snap
+    (module docstring); NaN where the event did not happen. ``snap_of`` is the robots' snap
+    detector (:func:`snapmem.catalog.robots._snap`: a jump out of a quiet state with a burst of
+    kinetic energy), here on the active plate's volume and kinetic energy, and the jump must move
+    the active plate by over JUMP_VOLUME R^3 (:func:`_jump`)."""
     p = traj.meta["parameters"]
     t, volume, kinetic = traj["t"], traj["volume_1"], traj["kinetic_1"]
     mid = 0.5 * (t[:-1] + t[1:])
     before_hold, before_down = np.interp([p["t_hold"], p["t_down"]], t, volume)
-    snap = _jump(t, volume, _snap(t, volume, kinetic, mid < p["t_down"], +1), p["R"])
+    snap = _jump(t, volume, snap_of(t, volume, kinetic, mid < p["t_down"], +1), p["R"])
     loading = t < snap if np.isfinite(snap) else t < p["t_hold"]
-    return {"snap": snap, "snap_back": _jump(t, volume, _snap(t, volume, kinetic, mid >= p["t_down"], -1), p["R"]),
+    return {"snap": snap, "snap_back": _jump(t, volume, snap_of(t, volume, kinetic, mid >= p["t_down"], -1), p["R"]),
             "pumped_volume": float(before_hold - before_down),
             "snap_pressure": float(np.max(traj["load_pressure"][loading])) if np.isfinite(snap) else float("nan")}
 

@@ -243,7 +243,7 @@ def events(traj: Trajectory) -> dict:
     if name in ("ball_drop", "ball_throw"):
         return _ball_events(traj, name)
     if name == "pump2":
-        return pump2_events(traj)
+        return pump2_events(traj, _snap)
     kinetic = traj["kinetic"]
     out = {}
     if name == "pump":
@@ -353,6 +353,14 @@ def _extremum(t, y, where, lowest: bool):
 
 # ------------------------------------------------------------------------------------------
 # pump2 (snapmem.catalog.pump2: the scene, its experiment and events)
-from snapmem.catalog.pump2 import pump2_events, pump2_experiment  # noqa: E402
+from snapmem.catalog.pump2 import pump2_events, pump2_loads  # noqa: E402
 
-EXPERIMENTS["pump2"] = pump2_experiment
+
+def _pump2_experiment(scene) -> Experiment:
+    p = scene.parameters
+    loads, q0 = pump2_loads(scene)
+    return Experiment(scene, schedule(**loads), p["t_end"], p["rho"], p["xi"], q0=q0,
+                      options=_options(p, dt=1e-3, dt_max=0.5, scheme="euler"))
+
+
+EXPERIMENTS["pump2"] = _pump2_experiment

@@ -35,7 +35,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import quad
 
 from snapmem.dynamics.loads import PiecewiseLinear
 from snapmem.dynamics.stepper import EPS, _Recorder
@@ -75,6 +74,7 @@ class FlowVolume:
         if isinstance(self.rate, PiecewiseLinear):
             return self.volume0 + _integral(self.rate, self.t0, t)
         if callable(self.rate):
+            from scipy.integrate import quad          # only here: start-up loads no scipy.integrate
             return self.volume0 + quad(self.rate, self.t0, t, limit=200)[0]
         return self.volume0 + float(self.rate) * (t - self.t0)
 
