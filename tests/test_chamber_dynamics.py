@@ -182,3 +182,19 @@ def test_pump2_snaps_at_the_active_plates_limit_pressure_and_pumps_into_the_pass
     assert found["pumped_volume"] > 0.05                                 # [m^3]
     silent = events(run("pump2", voltage=0.0, t_end=16.0))                # no voltage: nothing to pump
     assert math.isnan(silent["snap"])
+
+
+def test_an_interrupted_chamber_run_keeps_its_frames_and_the_chambers_columns():
+    scene = one_balloon(11)
+    V0 = scene.volume(scene.reference_state())
+
+    def interrupt(t, t_end):
+        if t > 2.05:                            # after the step to t = 2.1
+            raise KeyboardInterrupt
+
+    traj = simulate(scene, {"fluid_volume": flow_volume(V0, 100.0)}, 10.0, rho=1.0, damping=0.5,
+                    progress=interrupt, options=DynamicsOptions(dt=0.1, adaptive=False))
+    assert traj.meta["status"].startswith("interrupted at t = 2.1")
+    assert len(traj["t"]) == len(traj["volume_1"]) == len(traj["load_pressure"]) == len(traj["r_1"]) == 22
+    np.testing.assert_allclose(traj["volume"], V0 + 100.0 * traj["t"], rtol=1e-9)   # V0 + int Q, to the last frame
+    assert np.all(np.isfinite(traj["total"])) and traj["load_pressure"][-1] > 0

@@ -9,20 +9,27 @@ a syringe): voltage 300 V from t = 0; fluid flows in at ``flow_rate`` from ``t_u
 ``t_hold``; the voltage is switched off at ``t_hold`` (in ``t_switch``); the fluid flows back out
 at the same rate from ``t_down`` until the chamber holds its start volume again.
 
-Why this passive membrane (defaults ``passive_mu`` = 45 kPa, ``passive_H`` = 0.1 mm,
-``passive_R`` = 0.1 m, Mooney-Rivlin):
-- A Mooney-Rivlin plate's p(V) rises monotonically (MODEL.md: it has no pressure maximum), so the
-  passive membrane never snaps itself: every snap of the pair is the active plate's.
-- It is the same film and size as the active plate, without electrodes: the pump's two faces are
-  one material, and at 0 V and small stretch the passive plate is as stiff as the active one
-  (same mu), so the chamber's pressure stays in the pump's range (tens of Pa) over the cycle.
+Why this passive membrane (defaults: Mooney-Rivlin, ``passive_mu`` = 45 kPa, ``passive_H`` =
+0.1 mm, ``passive_R`` = 0.2 m):
+- A Mooney-Rivlin plate's p(V) rises monotonically (MODEL.md: no pressure maximum; traced here up
+  to 0.35 m^3 for c1/c2 = 7), so the passive membrane never snaps itself: every snap of the pair is
+  the active plate's.
 - Under a prescribed fluid volume a single plate cannot snap (volume control stabilises its
-  falling branch). The passive plate's compliance dV_2/dp turns the chamber into a soft
-  "pressure source" for the active plate: the pair snaps where the active plate's falling branch
-  is as steep as the passive one is compliant (dV_1/dp + dV_2/dp = 0), and the volume the active
-  plate takes in the snap comes out of the passive one. A stiffer passive membrane (larger
-  ``passive_mu`` or ``passive_H``) narrows the snap towards none; a softer one brings the pair's
-  snap towards the single plate's under pressure control.
+  falling branch); with two membranes on one fluid, the pair is stable while
+  p_1'(V_1) + p_2'(V_2) > 0 (as the two balloons). So the pair snaps only if the passive plate is
+  softer than the active plate's falling branch is steep: |p_1'| ~ 45 Pa / 0.06 m^3 ~ 700 Pa/m^3
+  at 300 V (from the limit point, 79.9 Pa at 0.0026 m^3, to the minimum, ~35 Pa at 0.065 m^3).
+- The same film (mu, H) as the active plate, without electrodes, at twice the radius: at a fixed
+  shape V/R^3 a plate's pressure scales as mu H / R and its stiffness dp/dV as mu H / R^4, so the
+  passive plate holds 8x the volume at half the pressure and is 16x softer: ~35 Pa/m^3 at the
+  active plate's limit pressure, where it holds ~0.38 m^3. The pair then snaps just past the
+  active plate's limit point (as under pressure control: 79.97 Pa against 79.9), and the active
+  plate's jump (0.0026 -> 0.27 m^3 at 300 V) comes out of the passive one with a pressure drop of
+  ~12 Pa. A stiffer passive membrane (larger ``passive_mu``, ``passive_H``, smaller
+  ``passive_R``) narrows the snap towards none; a softer one needs more fluid to reach the limit
+  pressure.
+- ``flow_rate`` 0.05 m^3/s fills the chamber to 0.5 m^3 by ``t_hold``: past the pair's snap at
+  300 V (12.6 s), with time to settle before the voltage goes off.
 
 Events (:func:`pump2_events`): ``snap`` (the active plate's fastest volume growth before
 ``t_down``), ``snap_back`` (its fastest fall after ``t_down``), ``pumped_volume`` [m^3] (the
