@@ -47,6 +47,7 @@ from snapmem.catalog.registry import Parameter, SceneSpec, register
 from snapmem.catalog.robot_scenes import EPS
 from snapmem.errors import SnapmemError
 from snapmem.model.chambers import Chamber
+from snapmem.model.materials import Law
 from snapmem.model.multi import MultiScene
 
 #: The passive membrane's law: Mooney-Rivlin with the validation's c1/c2 = 7.
@@ -54,7 +55,15 @@ PASSIVE_C1, PASSIVE_C2 = 0.4375, 0.0625
 
 
 def passive_parameters(params: dict) -> dict:
-    """The passive plate's membrane parameters: the active's, with its own law, size and no voltage."""
+    """The passive plate's membrane parameters: the active's, with its own law, size and no voltage.
+
+    Its law is Mooney-Rivlin (c1/c2 = 7) of modulus ``passive_mu``, unless the scene's law is given
+    as an instance (``build_scene("pump2", law=...)``): then both plates take that law, as every
+    membrane of a scene built with a law instance does."""
+    if isinstance(params["material"], Law):
+        return {**params, "H": params["passive_H"], "R": params["passive_R"], "voltage": None, "E_hat": 0.0,
+                "pressure": 0.0, "viscous_mu": None, "relaxation_time": None, "prestretch": 1.0,
+                "prestretch_1": None, "prestretch_2": None}
     return {**params, "material": "mooney_rivlin", "c1": PASSIVE_C1, "c2": PASSIVE_C2, "mu": params["passive_mu"],
             "H": params["passive_H"], "R": params["passive_R"], "voltage": None, "E_hat": 0.0, "pressure": 0.0,
             "viscous_mu": None, "relaxation_time": None, "prestretch": 1.0, "prestretch_1": None,
@@ -72,7 +81,7 @@ def _pump2(params: dict, with_loads: tuple) -> MultiScene:
     passive = build_plate(passive_parameters(params), ())
     passive.name = "passive"
     chamber = Chamber("volume", (0, 1))
-    return MultiScene([active, passive], [chamber], name="pump2", parameters=dict(params))
+    return MultiScene([active, passive], [chamber], name="pump2", parameters=dict(active.parameters))
 
 
 def start_state(scene: MultiScene) -> np.ndarray:
