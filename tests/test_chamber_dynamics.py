@@ -199,3 +199,6 @@ def test_an_interrupted_chamber_run_keeps_its_frames_and_the_chambers_columns():
     # Euler holds the fluid's volume at every step's end (the midpoint rule: at the step's middle)
     np.testing.assert_allclose(traj["volume"], V0 + 100.0 * traj["t"], rtol=1e-9)
     assert np.all(np.isfinite(traj["total"])) and traj["load_pressure"][-1] > 0
+    measured = scene.measures(traj["q"][-1])                # the per-membrane columns are the measures
+    for key in ("volume_1", "u_max_1", "stretch_max_1", "stretch_1"):
+        assert traj[key][-1] == pytest.approx(measured[key], rel=1e-12), key

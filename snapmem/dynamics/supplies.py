@@ -285,8 +285,11 @@ class ChamberStepper:
 class ChamberRecorder(_Recorder):
     """The frames of a multi-membrane run: each frame's potential (the membranes' energies without
     the chambers' pressure work, plus each chamber's own energy: a gas' -n R T ln V + p_atm V, a
-    prescribed pressure's -p V, 0 for an incompressible fluid), the chambers' volumes, and every
-    membrane's columns with its number as a suffix."""
+    prescribed pressure's -p V, 0 for an incompressible fluid) as ``potential`` (the chambers'
+    part also as ``chamber_energy``), the chambers' volumes (``volume``, ``volume_chamber_2``, ...),
+    and every membrane's columns with its number as a suffix: ``volume_i`` [m^3], ``kinetic_i``
+    [J], ``u_max_i`` [m], ``stretch_max_i``, its probes (``stretch_i``, ``deflection_i``) and its
+    nodes ``r_i``, ``z_i`` [m] (``r``, ``z``: the first membrane's)."""
 
     def __init__(self, scene: MultiScene, mass, interval: float, chambers: ChamberState):
         self.scene, self.mass, self.interval, self.compiled, self.internal = scene, mass, interval, None, None
@@ -335,7 +338,13 @@ class ChamberRecorder(_Recorder):
                                                        data["v"][:, part])
             for name, probe in m.probes.items():
                 data[f"{name}_{i + 1}"] = np.array([probe(qi) for qi in Q])
-            data[f"r_{i + 1}"], data[f"z_{i + 1}"] = Q[:, 0::2].copy(), Q[:, 1::2].copy()
+            data[f"r_{i + 1}"], data[f"z_{i + 1}"] = r, z = Q[:, 0::2].copy(), Q[:, 1::2].copy()
+            data[f"u_max_{i + 1}"] = np.hypot(r - m.meridian.r, z - m.meridian.z).max(axis=1)
+            a, b = m.meridian.edges[:, 0], m.meridian.edges[:, 1]
+            lam1 = np.hypot(r[:, b] - r[:, a], z[:, b] - z[:, a]) * m.meridian.inverse_length
+            with np.errstate(invalid="ignore"):
+                lam2 = 0.5 * (r[:, a] + r[:, b]) * m.meridian.inverse_mid_radius
+            data[f"stretch_max_{i + 1}"] = np.maximum(lam1.max(axis=1), np.nanmax(lam2, axis=1))
         data["r"], data["z"] = data["r_1"], data["z_1"]
         return Trajectory(data, meta)
 
