@@ -23,9 +23,9 @@ from snapmem.reference.two_balloons import balloon_volume, pair_stable
 from snapmem.statics import equilibrium
 
 
-def one_balloon(nodes):
+def one_balloon(nodes, **params):
     """The MODEL.md balloon (R = 10) bounding a fluid chamber of its own."""
-    params = get_spec("two_balloons").resolve(nodes=nodes)
+    params = get_spec("two_balloons").resolve(nodes=nodes, **params)
     return MultiScene([balloon_membrane(params, (), 10.0, "balloon")], [Chamber("volume", (0,))], name="balloon")
 
 
@@ -185,7 +185,7 @@ def test_pump2_snaps_at_the_active_plates_limit_pressure_and_pumps_into_the_pass
 
 
 def test_an_interrupted_chamber_run_keeps_its_frames_and_the_chambers_columns():
-    scene = one_balloon(11)
+    scene = one_balloon(11, stretch_limit=3.0)
     V0 = scene.volume(scene.reference_state())
 
     def interrupt(t, t_end):
@@ -202,3 +202,5 @@ def test_an_interrupted_chamber_run_keeps_its_frames_and_the_chambers_columns():
     measured = scene.measures(traj["q"][-1])                # the per-membrane columns are the measures
     for key in ("volume_1", "u_max_1", "stretch_max_1", "stretch_1"):
         assert traj[key][-1] == pytest.approx(measured[key], rel=1e-12), key
+    np.testing.assert_allclose(traj["rupture_margin"], 3.0 / traj["stretch_max_1"], rtol=1e-12)
+    assert np.all(traj["breakdown_margin_1"] == np.inf)                 # no breakdown strength set

@@ -42,6 +42,7 @@ from snapmem.dynamics.trajectory import Trajectory
 from snapmem.errors import SnapmemError, check_real
 from snapmem.kernels.banded import BorderedMatrix
 from snapmem.model.chambers import ChamberKind, gas_energy
+from snapmem.model.local_checks import failure_margins_many
 from snapmem.model.multi import MultiScene
 from snapmem.model.scene import Evaluation
 from snapmem.solvers.newton import newton
@@ -288,8 +289,9 @@ class ChamberRecorder(_Recorder):
     prescribed pressure's -p V, 0 for an incompressible fluid) as ``potential`` (the chambers'
     part also as ``chamber_energy``), the chambers' volumes (``volume``, ``volume_chamber_2``, ...),
     and every membrane's columns with its number as a suffix: ``volume_i`` [m^3], ``kinetic_i``
-    [J], ``u_max_i`` [m], ``stretch_max_i``, its probes (``stretch_i``, ``deflection_i``) and its
-    nodes ``r_i``, ``z_i`` [m] (``r``, ``z``: the first membrane's)."""
+    [J], ``u_max_i`` [m], ``stretch_max_i``, ``breakdown_margin_i``, ``rupture_margin_i``, its
+    probes (``stretch_i``, ``deflection_i``) and its nodes ``r_i``, ``z_i`` [m] (``r``, ``z``: the
+    first membrane's; ``breakdown_margin``, ``rupture_margin``: the smallest over the membranes)."""
 
     def __init__(self, scene: MultiScene, mass, interval: float, chambers: ChamberState):
         self.scene, self.mass, self.interval, self.compiled, self.internal = scene, mass, interval, None, None
@@ -345,6 +347,11 @@ class ChamberRecorder(_Recorder):
             with np.errstate(invalid="ignore"):
                 lam2 = 0.5 * (r[:, a] + r[:, b]) * m.meridian.inverse_mid_radius
             data[f"stretch_max_{i + 1}"] = np.maximum(lam1.max(axis=1), np.nanmax(lam2, axis=1))
+            voltages = [each.get(f"voltage_{i + 1}", 0.0) for each in loads]
+            for key, values in failure_margins_many(m, np.ascontiguousarray(Q), voltages).items():
+                data[f"{key}_{i + 1}"] = values
+        for key in ("breakdown_margin", "rupture_margin"):          # the scene's: its weakest membrane's
+            data[key] = np.min([data[f"{key}_{i + 1}"] for i in range(len(scene.membranes))], axis=0)
         data["r"], data["z"] = data["r_1"], data["z_1"]
         return Trajectory(data, meta)
 
