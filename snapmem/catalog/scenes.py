@@ -13,3 +13,4 @@ import snapmem.catalog.robot_scenes  # noqa: F401  (registers pump, the grippers
 __all__ = ["SCENES", "Parameter", "SceneSpec", "build_scene", "get_spec", "register", "build_membrane",
            "material_parameters"]
 import snapmem.catalog.chambers  # noqa: F401  (registers two_balloons)
+import snapmem.catalog.pump2  # noqa: F401  (registers pump2)

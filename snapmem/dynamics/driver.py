@@ -24,9 +24,11 @@ from snapmem.dynamics.loads import as_schedule, schedule
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.schemes import SCHEME_BY_NAME
 from snapmem.dynamics.stepper import _InternalState, _Recorder, _Stepper
+from snapmem.dynamics.supplies import chamber_parts, lumped_masses_of
 from snapmem.dynamics.trajectory import Trajectory
 from snapmem.errors import SolverError, check_real
 from snapmem.io.interrupts import HeldInterrupts
+from snapmem.model.multi import MultiScene
 from snapmem.model.scene import Scene
 from snapmem.threads import single_threaded
 
@@ -43,6 +45,8 @@ def lumped_masses(scene: Scene, rho: float) -> np.ndarray:
     its cap), for both r_i and z_i; each rigid body's own mass for its height.
     """
     rho = check_real("rho", rho, minimum=0.0, min_inclusive=False)
+    if isinstance(scene, MultiScene):
+        return lumped_masses_of(scene, rho, lumped_masses)
     m = np.repeat(rho * scene.thickness * scene.node_area, 2)
     return np.concatenate([m, [b.mass for b in scene.bodies]])
 
@@ -108,8 +112,13 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     why = scene.inadmissible(q)
     if why is not None:
         raise SolverError(f"initial state is outside the model's domain: {why}")
-    stepper = _Stepper(scene, mass, c, options)
-    internal = _InternalState(scene, q)      # viscous networks' internal stretches (none: does nothing)
+    chambers, recorder_class = None, _Recorder
+    if isinstance(scene, MultiScene):     # several membranes: their chambers' pressures are unknowns too
+        stepper, chambers, recorder_class = chamber_parts(scene, mass, c, options, q, scene.resolve_loads(at(t0)))
+        internal = chambers
+    else:
+        stepper = _Stepper(scene, mass, c, options)
+        internal = _InternalState(scene, q)      # viscous networks' internal stretches (none: does nothing)
     if resume is not None:
         internal.restore(resume.get("internal", {}))
     free = scene.free
@@ -120,7 +129,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     def loads_at(t):                     # a step asks for the loads at its end twice (solve, record)
         if last_loads[0] != t:
             last_loads[:] = t, scene.resolve_loads(at(t))
-        return last_loads[1]
+        return last_loads[1] if chambers is None else chambers.with_pressures(last_loads[1])
 
     def acceleration(q, v, t):
         a = np.zeros_like(q)
@@ -128,7 +137,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         a[massive] = -(g[massive] + c[massive] * v[massive]) / mass[massive]
         return a
 
-    recorder = _Recorder(scene, mass, options.save_interval, stepper.compiled, internal)
+    recorder = recorder_class(scene, mass, options.save_interval, stepper.compiled, internal)
     a_prev = acceleration(q, v, t0) if resume is None else np.array(resume["a_prev"], dtype=float)
     t, dt = t0, min(options.dt, max(t_end - t0, options.dt_min)) if resume is None else float(resume["dt"])
     recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True, internal=internal.frame())

@@ -143,13 +143,48 @@ class MultiScene:
     def reference_state(self) -> np.ndarray:
         return np.concatenate([m.reference_state() for m in self.membranes])
 
+    # what the time stepper asks of a scene (snapmem.dynamics): the membranes' dofs, stacked
+    bodies = ()
+
+    @property
+    def n_node_dofs(self) -> int:
+        """All degrees of freedom (the membranes carry no rigid bodies)."""
+        return int(self.offsets[-1])
+
+    @property
+    def fixed(self) -> tuple:
+        """Every membrane's fixed degrees of freedom, in the stacked numbering."""
+        return tuple(int(d + o) for m, o in zip(self.membranes, self.offsets) for d in m.fixed)
+
+    def membrane_of_dof(self, i: int) -> int:
+        """The membrane (from 0) degree of freedom i of the stacked state belongs to."""
+        return int(np.searchsorted(self.offsets, i, side="right") - 1)
+
     def split(self, q: np.ndarray) -> list:
         """The membranes' states (views of q)."""
         return [q[a:b] for a, b in zip(self.offsets[:-1], self.offsets[1:])]
 
+    def supply_load_names(self) -> tuple:
+        """The loads a time schedule may add to a scene's (:mod:`snapmem.dynamics.supplies`), per
+        chamber with a multiplier: ``fluid_volume`` [m^3] (a fluid chamber's prescribed volume),
+        ``source_pressure`` [Pa] and ``flow_resistance`` [Pa s/m^3] (a fluid chamber fed through a
+        resistance), ``gas_amount`` [J] (n R T of a gas chamber); suffixed ``_2``, ... beyond the first."""
+        names = []
+        for c, chamber in enumerate(self.chambers):
+            suffix = "" if c == 0 else f"_{c + 1}"
+            if chamber.kind.value == "volume":
+                names += [f"fluid_volume{suffix}", f"source_pressure{suffix}", f"flow_resistance{suffix}"]
+            elif chamber.kind.value == "gas":
+                names.append(f"gas_amount{suffix}")
+        return tuple(names)
+
     def resolve_loads(self, loads: Mapping[str, float] | None) -> dict:
         out = dict(self.loads)
+        supplies = self.supply_load_names() if loads else ()
         for key, value in (loads or {}).items():
+            if key not in out and key in supplies:
+                out[key] = check_real(key, value)
+                continue
             if key not in out:
                 raise SnapmemError(f"load {key!r}: this scene has no such load; it has {sorted(out) or 'none'}")
             out[key] = check_real(key, value)
@@ -270,7 +305,7 @@ class MultiScene:
         if name.startswith("__"):
             raise AttributeError(name)
         raise SnapmemError(f"scene {self.__dict__.get('name', 'multi')!r} has several membranes: {name!r} is not "
-                           "available for it yet (statics and continuation are: snapmem trace)")
+                           "available for it yet (statics, continuation and dynamics are)")
 
     def __repr__(self):
         return (f"MultiScene({self.name!r}, membranes={len(self.membranes)}, "
