@@ -117,3 +117,16 @@ def test_no_module_over_500_lines():
 
 def test_the_checker_sees_a_cycle():
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_file_carries_a_merge_conflict_marker():
+    """A conflict left in a doc or module after a merge (it happened once, in docs/MODEL.md)."""
+    root = Path(__file__).resolve().parents[1]
+    markers = ("<<<<<<< ", ">>>>>>> ")
+    bad = []
+    for path in [*root.glob("snapmem/**/*.py"), *root.glob("docs/**/*.md"), *root.glob("tests/*.py"),
+                 *root.glob("studies/*.py"), root / "README.md", root / "pyproject.toml"]:
+        for n, line in enumerate(path.read_text().splitlines(), 1):
+            if line.startswith(markers):
+                bad.append(f"{path.relative_to(root)}:{n}")
+    assert not bad, bad
