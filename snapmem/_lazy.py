@@ -12,17 +12,41 @@ subpackages; a command loads what it calls, once. Three helpers keep this to the
   A kernel that calls other kernels sees them as numba dispatchers: making a dispatcher rebinds
   the kernels its code names, in its module (or its closure), to theirs (numba types globals at compile time).
 
+First use after an install (numba's cache empty): a cached kernel (``cache=True``) that is not in
+the cache yet runs as Python (its ``py_func``, the same operations in the same order, so the same
+numbers; tests/test_startup_cold.py) instead of compiling for seconds, while the process's time in
+such kernels stays under :data:`INTERPRET_BUDGET`; past it, the kernels compile. At exit, a
+detached process compiles the kernels that ran as Python, for the argument types they saw, so the
+next command loads them (:func:`compile_in_background`). The kernels of the compiled time step
+(``snapmem.dynamics``: long loops over steps) always compile. ``SNAPMEM_COLD=compile`` restores
+compiling at the first call; ``SNAPMEM_BACKGROUND_COMPILE=0`` turns off the background compile.
+See docs/performance.md ("First use").
+
 Measured on the 2-core machine (whole process, ``snapmem scenes``): importing numba costs 0.25 s,
 pandas 0.2 s, scipy.optimize with scipy.linalg 0.35 s.
 """
 
 from __future__ import annotations
 
+import atexit
 import importlib
+import json
+import os
+import subprocess
 import sys
+import tempfile
+import time
 import types
 
-__all__ = ["Kernel", "function", "module", "njit", "materialized"]
+__all__ = ["Kernel", "function", "module", "njit", "materialized", "interpreted", "compiling", "INTERPRET_BUDGET"]
+
+#: Seconds of Python-run kernels (outermost calls) a process may spend before its uncached kernels
+#: compile instead: about what compiling a command's kernels costs (10-15 s), so that a small
+#: problem (a 101-node trace: 2-3 s as Python) never compiles and a big one takes at most about
+#: twice as long as compiling at once would have.
+INTERPRET_BUDGET = float(os.environ.get("SNAPMEM_INTERPRET_BUDGET", "10.0"))
+#: Modules whose kernels always compile (their loops run for thousands of steps).
+ALWAYS_COMPILED = ("snapmem.dynamics.",)
 
 
 class _Module:
@@ -85,6 +109,8 @@ class Kernel:
         self.py_func = py_func
         self.options = options
         self._dispatcher = None
+        self._interpreted = False           # runs as Python in this process (not in the cache yet)
+        self._decided = False
         self.__name__ = py_func.__name__
         self.__qualname__ = py_func.__qualname__
         self.__module__ = py_func.__module__
@@ -118,11 +144,183 @@ class Kernel:
 
     def __call__(self, *args):
         dispatcher = self._dispatcher
-        return (dispatcher if dispatcher is not None else self.dispatcher)(*args)
+        if dispatcher is not None:
+            return dispatcher(*args)
+        if not self._decided:
+            self._decided = True
+            self._interpreted = _interpret_when_uncached(self) and not _in_cache(self)
+        if self._interpreted and _spent[0] < INTERPRET_BUDGET:
+            return _run_as_python(self, args)
+        return self.dispatcher(*args)
 
     def __repr__(self) -> str:
         state = "dispatcher made" if self._dispatcher is not None else "not compiled yet"
         return f"<compiled kernel {self.__module__}.{self.__qualname__} ({state})>"
+
+
+_spent = [0.0]          # seconds in outermost Python-run kernels, this process
+_depth = [0]
+_seen: dict = {}        # (module, qualname) -> set of argument descriptions, of Python-run kernels
+_policy = {"compile": os.environ.get("SNAPMEM_COLD", "interpret") == "compile"}
+
+
+def _interpret_when_uncached(kernel: "Kernel") -> bool:
+    return (kernel.options.get("cache", False) and not _policy["compile"]
+            and not kernel.__module__.startswith(ALWAYS_COMPILED))
+
+
+def _run_as_python(kernel: "Kernel", args):
+    if _depth[0]:
+        return kernel.py_func(*args)
+    key = (kernel.__module__, kernel.__qualname__)
+    if key not in _seen:
+        _seen[key] = set()
+        if len(_seen) == 1 and os.environ.get("SNAPMEM_BACKGROUND_COMPILE", "1") != "0":
+            atexit.register(compile_in_background)
+    try:
+        _seen[key].add(tuple(_describe(a) for a in args))
+    except TypeError:
+        pass                                  # an argument we cannot describe: not compiled ahead
+    _depth[0] += 1
+    start = time.perf_counter()
+    try:
+        return kernel.py_func(*args)
+    finally:
+        _depth[0] -= 1
+        _spent[0] += time.perf_counter() - start
+
+
+class compiling:
+    """``with compiling():`` every kernel called inside compiles (or loads) at its first call,
+    cached or not (``snapmem warmup`` uses it). Kernels already decided keep their way."""
+
+    def __enter__(self):
+        self._before = _policy["compile"]
+        _policy["compile"] = True
+
+    def __exit__(self, *exc):
+        _policy["compile"] = self._before
+
+
+def interpreted() -> list[str]:
+    """Qualified names of the kernels this process ran as Python (not in numba's cache yet)."""
+    return [f"{module}.{name}" for module, name in _seen]
+
+
+def _cache_dirs(source: str) -> list[str]:
+    """Where numba looks for a function's cache (numba.core.caching's locators, in order)."""
+    import hashlib
+    directory = os.path.dirname(os.path.abspath(source))
+    subpath = "_".join([os.path.basename(directory), hashlib.sha1(directory.encode()).hexdigest()])
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return [os.path.join(os.environ["NUMBA_CACHE_DIR"], subpath)]
+    user = os.path.join(os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "numba", subpath)
+    return [os.path.join(directory, "__pycache__"), user]
+
+
+def _in_cache(kernel: "Kernel") -> bool:
+    """Whether numba's cache holds an index for the kernel newer than its source (a cheap test, no
+    numba import: a stale or other-typed entry makes numba compile, which is only slower)."""
+    code = kernel.py_func.__code__
+    source = code.co_filename
+    base = "%s.%s-%d.py%d%d%s.nbi" % (os.path.splitext(os.path.basename(source))[0],
+                                      kernel.__qualname__.replace("<", "").replace(">", ""), code.co_firstlineno,
+                                      sys.version_info[0], sys.version_info[1], getattr(sys, "abiflags", ""))
+    try:
+        stamp = os.stat(source).st_mtime
+    except OSError:
+        return True
+    for directory in _cache_dirs(source):
+        try:
+            if os.stat(os.path.join(directory, base)).st_mtime >= stamp:
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def _describe(value):
+    """An argument's numba type, as plain data: ("a", dtype, ndim, layout, writeable) for an array,
+    ("t", items) for a tuple, ("s", type name) for a Python or numpy scalar."""
+    import numpy as np
+    if isinstance(value, np.ndarray):
+        layout = "C" if value.flags.c_contiguous else "F" if value.flags.f_contiguous else "A"
+        return ("a", value.dtype.str, value.ndim, layout, bool(value.flags.writeable))
+    if type(value) is tuple:
+        return ("t", tuple(_describe(v) for v in value))
+    if isinstance(value, (bool, int, float, complex, np.generic)) or value is None:
+        return ("s", type(value).__module__, type(value).__name__)
+    raise TypeError(type(value))
+
+
+def _example(description):
+    """A value of the numba type ``description`` names (for ``numba.typeof``)."""
+    import numpy as np
+    kind = description[0]
+    if kind == "a":
+        _, dtype, ndim, layout, writeable = description
+        shape = (3,) * ndim
+        value = np.zeros(shape, dtype=dtype, order="F" if layout == "F" else "C")
+        if layout == "A":
+            value = np.zeros((6,) + (3,) * (ndim - 1), dtype=dtype)[::2]
+        value.flags.writeable = writeable
+        return value
+    if kind == "t":
+        return tuple(_example(d) for d in description[1])
+    module, name = description[1], description[2]
+    if name == "NoneType":
+        return None
+    kind_type = getattr(np, name) if module == "numpy" else {"bool": bool, "int": int, "float": float,
+                                                              "complex": complex}[name]
+    return kind_type(0)
+
+
+def compile_in_background() -> None:
+    """Start a detached process that compiles, into numba's cache, the kernels this process ran as
+    Python, for the argument types they were called with (run at exit)."""
+    if not _seen:
+        return
+    jobs = [[module, name, [list(map(_plain, d)) for d in descriptions]] for (module, name), descriptions in _seen.items()]
+    handle, path = tempfile.mkstemp(prefix="snapmem-compile-", suffix=".json")
+    with os.fdopen(handle, "w") as file:
+        json.dump(jobs, file)
+    environment = dict(os.environ, SNAPMEM_BACKGROUND_COMPILE="0")
+    try:
+        subprocess.Popen([sys.executable, "-c", "import sys; from snapmem._lazy import compile_jobs; "
+                          "compile_jobs(sys.argv[1])", path], stdin=subprocess.DEVNULL,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                         env=environment)
+    except OSError:
+        os.unlink(path)
+
+
+def _plain(part):
+    return [_plain(p) for p in part] if isinstance(part, tuple) else part
+
+
+def _tupled(part):
+    return tuple(_tupled(p) for p in part) if isinstance(part, list) else part
+
+
+def compile_jobs(path: str) -> list[tuple[str, float]]:
+    """Compile the kernels listed in a job file of :func:`compile_in_background` (then delete it).
+    Returns (kernel, seconds) for each."""
+    import numba
+    with open(path) as file:
+        jobs = json.load(file)
+    os.unlink(path)
+    done = []
+    for module_name, qualname, descriptions in jobs:
+        kernel = importlib.import_module(module_name)
+        for part in qualname.split("."):
+            kernel = getattr(kernel, part)
+        dispatcher = kernel.dispatcher if isinstance(kernel, Kernel) else kernel
+        start = time.perf_counter()
+        for description in descriptions:
+            types_ = tuple(numba.typeof(_example(_tupled(d))) for d in description)
+            dispatcher.compile(types_)
+        done.append((f"{module_name}.{qualname}", time.perf_counter() - start))
+    return done
 
 
 def _rebind(kernel: "Kernel", dispatcher) -> None:
@@ -160,3 +358,4 @@ def njit(function=None, **options):
 def materialized() -> list[Kernel]:
     """The kernels whose dispatchers this process has made, in order."""
     return list(_made)
+
