@@ -121,7 +121,7 @@ class Kernel:
     def dispatcher(self):
         """The numba dispatcher (made on first access; compiling happens at its first call)."""
         if self._dispatcher is None:
-            import numba
+            numba = _import_numba()
             self._dispatcher = numba.njit(**self.options)(self.py_func)
             _made.append(self)
             namespace = self.py_func.__globals__
@@ -156,6 +156,23 @@ class Kernel:
     def __repr__(self) -> str:
         state = "dispatcher made" if self._dispatcher is not None else "not compiled yet"
         return f"<compiled kernel {self.__module__}.{self.__qualname__} ({state})>"
+
+
+def _import_numba():
+    """``import numba``, skipping numba's import-time BLAS probe where it would import scipy.linalg
+    (0.15 s): the probe only chooses how numba compiles np.correlate and np.convolve, which no
+    snapmem kernel uses (np.dot and np.linalg in a kernel still find BLAS: they look it up when
+    compiled). ``SNAPMEM_NUMBA_BLAS_PROBE=1`` keeps the probe."""
+    import numba
+    if ("numba.np.arraymath" not in sys.modules and "scipy.linalg.cython_blas" not in sys.modules
+            and os.environ.get("SNAPMEM_NUMBA_BLAS_PROBE", "0") != "1"):
+        sys.modules["scipy.linalg.cython_blas"] = None          # the probe's import fails at once
+        try:
+            import numba.np.arraymath  # noqa: F401
+        finally:
+            if sys.modules.get("scipy.linalg.cython_blas", 0) is None:
+                del sys.modules["scipy.linalg.cython_blas"]
+    return numba
 
 
 _spent = [0.0]          # seconds in outermost Python-run kernels, this process
