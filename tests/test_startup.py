@@ -66,3 +66,11 @@ def test_lazy_kernels_compile_on_first_call_and_call_each_other():
     assert len(sum_of_squares.signatures) == 1
     assert {"sum_of_squares", "square"} <= {k.__name__ for k in _lazy.materialized()}
     assert type(square).__name__ == "CPUDispatcher"          # the callee, rebound for numba to type it
+
+
+def test_a_trace_imports_neither_scipy_optimize_nor_scipy_linalg():
+    # brentq is snapmem.kernels.roots' (scipy's, transcribed); numba gets scipy's BLAS table alone
+    loaded = loaded_after("from snapmem.cli import main\nwith contextlib.redirect_stdout(io.StringIO()):\n"
+                          "    main(['trace', 'balloon', '--set', 'nodes=21', '--until', 'stretch_max=2'])",
+                          SNAPMEM_COLD="compile").split()
+    assert "numba" in loaded and "scipy.optimize" not in loaded and "scipy.linalg" not in loaded
