@@ -13,13 +13,15 @@ subpackages; a command loads what it calls, once. Three helpers keep this to the
   the kernels its code names, in its module (or its closure), to theirs (numba types globals at compile time).
 
 First use after an install (numba's cache empty): a cached kernel (``cache=True``) that is not in
-the cache yet runs as Python (its ``py_func``, the same operations in the same order, so the same
-numbers; tests/test_startup_cold.py) instead of compiling for seconds, while the process's time in
-such kernels stays under :data:`INTERPRET_BUDGET`; past it, the kernels compile. At exit, a
-detached process compiles the kernels that ran as Python, for the argument types they saw, so the
-next command loads them (:func:`compile_in_background`). The kernels of the compiled time step
-(``snapmem.dynamics``: long loops over steps) always compile. ``SNAPMEM_COLD=compile`` restores
-compiling at the first call; ``SNAPMEM_BACKGROUND_COMPILE=0`` turns off the background compile.
+the cache yet runs as Python, its ``py_func``, instead of compiling for seconds. The operations and
+their order are the same, so the numbers are: numba compiles without fastmath and so neither
+reorders nor fuses floating-point operations (tests/test_startup_cold.py compares every number
+of three traces). This lasts while the process's time in such kernels stays under
+:data:`INTERPRET_BUDGET`; past it, the kernels compile. At exit, a detached process compiles the
+kernels that ran as Python, for the argument types they saw, so that the next command loads them
+(:func:`compile_in_background`). The kernels of the compiled time step (``snapmem.dynamics``:
+long loops over steps) always compile. ``SNAPMEM_COLD=compile`` restores compiling at the first
+call; ``SNAPMEM_BACKGROUND_COMPILE=0`` turns off the background compile.
 See docs/performance.md ("First use").
 
 Measured on the 2-core machine (whole process, ``snapmem scenes``): importing numba costs 0.25 s,
@@ -38,9 +40,9 @@ import types
 __all__ = ["Kernel", "function", "module", "njit", "materialized", "interpreted", "compiling", "INTERPRET_BUDGET"]
 
 #: Seconds of Python-run kernels (outermost calls) a process may spend before its uncached kernels
-#: compile instead: about what compiling a command's kernels costs (10-15 s), so that a small
-#: problem (a 101-node trace: 2-3 s as Python) never compiles and a big one takes at most about
-#: twice as long as compiling at once would have.
+#: compile instead: about what compiling a command's kernels costs, so that a small problem (a
+#: 101-node trace) never compiles and a big one takes at most about twice as long as compiling at
+#: once would have (figures: docs/performance.md, "First use").
 INTERPRET_BUDGET = float(os.environ.get("SNAPMEM_INTERPRET_BUDGET", "10.0"))
 #: Modules whose kernels always compile (their loops run for thousands of steps).
 ALWAYS_COMPILED = ("snapmem.dynamics.",)
@@ -165,8 +167,8 @@ def _import_numba():
 
 def _load_cython_blas() -> None:
     """Import ``scipy.linalg.cython_blas`` (the BLAS function table numba's kernels call through)
-    without running ``scipy/linalg/__init__.py``, which imports all of scipy.linalg (0.15 s quiet,
-    0.3-0.4 s under load; docs/performance.md).
+    without running ``scipy/linalg/__init__.py``, which imports all of scipy.linalg (its cost:
+    docs/performance.md, "Start-up").
 
     numba imports that module at its first compilation (its BLAS probe) and whenever a kernel
     using BLAS is loaded from the cache (the compiled time step's ``residual @ dx``). The table is

@@ -1,7 +1,7 @@
 """Brent's root finder in Python: scipy.optimize.brentq's iteration, operation for operation.
 
 ``from scipy.optimize import brentq`` imports all of scipy.optimize, and with it scipy.linalg and
-scipy.sparse: 0.15-0.3 s of a 1 s ``snapmem trace`` (docs/performance.md). The iteration is 40
+scipy.sparse, a large part of a ``snapmem trace`` (docs/performance.md, "Start-up"). The iteration is 40
 lines of C in scipy (``scipy/optimize/Zeros/brentq.c``), transcribed here with the same
 arithmetic in the same order, so it returns the same root bit for bit after the same function
 calls (tests/test_startup_cold.py checks this against scipy on many brackets).
