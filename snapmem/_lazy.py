@@ -94,7 +94,8 @@ _made: list["Kernel"] = []        # kernels whose dispatcher exists, in the orde
 
 
 class Kernel:
-    """A function compiled by numba at its first call (see :func:`njit`).
+    """A function compiled by numba at its first call (see :func:`njit`), or, while numba's cache
+    does not hold it, run as Python (the module's docstring says when).
 
     Attributes
     ----------
