@@ -357,6 +357,9 @@ def compile_in_background() -> None:
     import json
     import subprocess
     import tempfile
+    lock = _take_compile_lock()
+    if lock is None:
+        return                        # another process is compiling into this cache (a sweep's workers)
     jobs = [[module, name, [list(map(_plain, d)) for d in descriptions]] for (module, name), descriptions in _seen.items()]
     handle, path = tempfile.mkstemp(prefix="snapmem-compile-", suffix=".json")
     with os.fdopen(handle, "w") as file:
@@ -364,11 +367,39 @@ def compile_in_background() -> None:
     environment = dict(os.environ, SNAPMEM_BACKGROUND_COMPILE="0")
     try:
         subprocess.Popen([sys.executable, "-c", "import sys; from snapmem._lazy import compile_jobs; "
-                          "compile_jobs(sys.argv[1])", path], stdin=subprocess.DEVNULL,
+                          "compile_jobs(sys.argv[1], sys.argv[2])", path, lock], stdin=subprocess.DEVNULL,
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
                          env=environment)
     except OSError:
         os.unlink(path)
+        os.unlink(lock)
+
+
+#: A compile lock older than this [s] is left from a compile that died: taken over.
+STALE_LOCK = 900.0
+
+
+def _take_compile_lock() -> str | None:
+    """Create the lock file of background compiles into this cache; None if another holds it."""
+    import hashlib
+    import tempfile
+    place = os.environ.get("NUMBA_CACHE_DIR", "") + os.pathsep + os.path.dirname(os.path.abspath(__file__))
+    lock = os.path.join(tempfile.gettempdir(),
+                        f"snapmem-compile-{hashlib.sha1(place.encode()).hexdigest()[:16]}.lock")
+    for _ in range(2):
+        try:
+            os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+            return lock
+        except FileExistsError:
+            try:
+                if time.time() - os.stat(lock).st_mtime < STALE_LOCK:
+                    return None
+                os.unlink(lock)
+            except OSError:
+                return None
+        except OSError:
+            return None
+    return None
 
 
 def _plain(part):
@@ -379,9 +410,17 @@ def _tupled(part):
     return tuple(_tupled(p) for p in part) if isinstance(part, list) else part
 
 
-def compile_jobs(path: str) -> list[tuple[str, float]]:
-    """Compile the kernels listed in a job file of :func:`compile_in_background` (then delete it).
-    Returns (kernel, seconds) for each."""
+def compile_jobs(path: str, lock: str | None = None) -> list[tuple[str, float]]:
+    """Compile the kernels listed in a job file of :func:`compile_in_background` (then delete it,
+    and the ``lock`` file when done). Returns (kernel, seconds) for each."""
+    try:
+        return _compile_jobs(path)
+    finally:
+        if lock is not None and os.path.exists(lock):
+            os.unlink(lock)
+
+
+def _compile_jobs(path: str) -> list[tuple[str, float]]:
     import json
     import numba
     with open(path) as file:
