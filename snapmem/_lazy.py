@@ -34,6 +34,7 @@ import atexit
 import importlib
 import os
 import sys
+import threading
 import time
 import types
 
@@ -233,7 +234,7 @@ class _AttachCythonBlas:
 
 
 _spent = [0.0]          # seconds in outermost Python-run kernels, this process
-_depth = [0]
+_nesting = threading.local()     # .depth: Python-run kernels open in this thread (only the outermost is timed)
 _seen: dict = {}        # (module, qualname) -> set of argument descriptions, of Python-run kernels
 _policy = {"compile": os.environ.get("SNAPMEM_COLD", "interpret") == "compile"}
 
@@ -244,7 +245,8 @@ def _interpret_when_uncached(kernel: "Kernel") -> bool:
 
 
 def _run_as_python(kernel: "Kernel", args):
-    if _depth[0]:
+    depth = getattr(_nesting, "depth", 0)
+    if depth:
         return kernel.py_func(*args)
     key = (kernel.__module__, kernel.__qualname__)
     if key not in _seen:
@@ -255,12 +257,14 @@ def _run_as_python(kernel: "Kernel", args):
         _seen[key].add(tuple(_describe(a) for a in args))
     except TypeError:
         pass                                  # an argument we cannot describe: not compiled ahead
-    _depth[0] += 1
+    import numpy as np
+    _nesting.depth = depth + 1
     start = time.perf_counter()
     try:
-        return kernel.py_func(*args)
+        with np.errstate(all="ignore"):       # compiled kernels warn of no overflow (inf, NaN) either
+            return kernel.py_func(*args)
     finally:
-        _depth[0] -= 1
+        _nesting.depth = depth
         _spent[0] += time.perf_counter() - start
 
 
