@@ -12,17 +12,41 @@ subpackages; a command loads what it calls, once. Three helpers keep this to the
   A kernel that calls other kernels sees them as numba dispatchers: making a dispatcher rebinds
   the kernels its code names, in its module (or its closure), to theirs (numba types globals at compile time).
 
+First use after an install (numba's cache empty): a cached kernel (``cache=True``) that is not in
+the cache yet runs as Python, its ``py_func``, instead of compiling for seconds. The operations and
+their order are the same, so the numbers are: numba compiles without fastmath and so neither
+reorders nor fuses floating-point operations (tests/test_startup_cold.py compares every number
+of three traces). This lasts while the process's time in such kernels stays under
+:data:`INTERPRET_BUDGET`; past it, the kernels compile. At exit, a detached process compiles the
+kernels that ran as Python, for the argument types they saw, so that the next command loads them
+(:func:`compile_in_background`). The kernels of the compiled time step (``snapmem.dynamics``:
+long loops over steps) always compile. ``SNAPMEM_COLD=compile`` restores compiling at the first
+call; ``SNAPMEM_BACKGROUND_COMPILE=0`` turns off the background compile.
+See docs/performance.md ("First use").
+
 Measured on the 2-core machine (whole process, ``snapmem scenes``): importing numba costs 0.25 s,
 pandas 0.2 s, scipy.optimize with scipy.linalg 0.35 s.
 """
 
 from __future__ import annotations
 
+import atexit
 import importlib
+import os
 import sys
+import threading
+import time
 import types
 
-__all__ = ["Kernel", "function", "module", "njit", "materialized"]
+__all__ = ["Kernel", "function", "module", "njit", "materialized", "interpreted", "compiling", "INTERPRET_BUDGET"]
+
+#: Seconds of Python-run kernels (outermost calls) a process may spend before its uncached kernels
+#: compile instead: about what compiling a command's kernels costs, so that a small problem (a
+#: 101-node trace) never compiles and a big one takes at most about twice as long as compiling at
+#: once would have (figures: docs/performance.md, "First use").
+INTERPRET_BUDGET = float(os.environ.get("SNAPMEM_INTERPRET_BUDGET", "10.0"))
+#: Modules whose kernels always compile (their loops run for thousands of steps).
+ALWAYS_COMPILED = ("snapmem.dynamics.",)
 
 
 class _Module:
@@ -71,7 +95,8 @@ _made: list["Kernel"] = []        # kernels whose dispatcher exists, in the orde
 
 
 class Kernel:
-    """A function compiled by numba at its first call (see :func:`njit`).
+    """A function compiled by numba at its first call (see :func:`njit`), or, while numba's cache
+    does not hold it, run as Python (the module's docstring says when).
 
     Attributes
     ----------
@@ -85,6 +110,8 @@ class Kernel:
         self.py_func = py_func
         self.options = options
         self._dispatcher = None
+        self._interpreted = False           # runs as Python in this process (not in the cache yet)
+        self._decided = False
         self.__name__ = py_func.__name__
         self.__qualname__ = py_func.__qualname__
         self.__module__ = py_func.__module__
@@ -95,7 +122,7 @@ class Kernel:
     def dispatcher(self):
         """The numba dispatcher (made on first access; compiling happens at its first call)."""
         if self._dispatcher is None:
-            import numba
+            numba = _import_numba()
             self._dispatcher = numba.njit(**self.options)(self.py_func)
             _made.append(self)
             namespace = self.py_func.__globals__
@@ -118,11 +145,303 @@ class Kernel:
 
     def __call__(self, *args):
         dispatcher = self._dispatcher
-        return (dispatcher if dispatcher is not None else self.dispatcher)(*args)
+        if dispatcher is not None:
+            return dispatcher(*args)
+        if not self._decided:
+            self._decided = True
+            self._interpreted = _interpret_when_uncached(self) and not _in_cache(self)
+        if self._interpreted and _spent[0] < INTERPRET_BUDGET:
+            return _run_as_python(self, args)
+        return self.dispatcher(*args)
 
     def __repr__(self) -> str:
         state = "dispatcher made" if self._dispatcher is not None else "not compiled yet"
         return f"<compiled kernel {self.__module__}.{self.__qualname__} ({state})>"
+
+
+def _import_numba():
+    """``import numba``, with scipy's BLAS table loaded alone beforehand (:func:`_load_cython_blas`)."""
+    if os.environ.get("SNAPMEM_FULL_SCIPY_LINALG", "0") != "1":
+        _load_cython_blas()
+    import numba
+    return numba
+
+
+def _load_cython_blas() -> None:
+    """Import ``scipy.linalg.cython_blas`` (the BLAS function table numba's kernels call through)
+    without running ``scipy/linalg/__init__.py``, which imports all of scipy.linalg (its cost:
+    docs/performance.md, "Start-up").
+
+    numba imports that module at its first compilation (its BLAS probe) and whenever a kernel
+    using BLAS is loaded from the cache (the compiled time step's ``residual @ dx``). The table is
+    an extension module that needs nothing else from scipy.linalg; a placeholder package stands in
+    for scipy.linalg while it loads and is removed at once, and the real scipy.linalg, when imported
+    later, is the complete package with this same module as its ``cython_blas``.
+    ``SNAPMEM_FULL_SCIPY_LINALG=1`` imports scipy.linalg as usual instead.
+    """
+    if "scipy.linalg" in sys.modules or "scipy.linalg.cython_blas" in sys.modules:
+        return
+    try:
+        import importlib.util
+        import scipy
+        spec = importlib.util.find_spec("scipy.linalg")
+    except ImportError:
+        return
+    if spec is None or not spec.submodule_search_locations:
+        return
+    import _imp
+    placeholder = types.ModuleType("scipy.linalg")
+    placeholder.__path__ = list(spec.submodule_search_locations)
+    _imp.acquire_lock()               # the global import lock (reentrant): no other thread imports meanwhile
+    try:
+        if "scipy.linalg" in sys.modules:
+            return
+        sys.modules["scipy.linalg"] = placeholder
+        try:
+            importlib.import_module("scipy.linalg.cython_blas")
+        except ImportError:
+            return
+        finally:
+            if sys.modules.get("scipy.linalg") is placeholder:
+                del sys.modules["scipy.linalg"]
+            if vars(scipy).get("linalg") is placeholder:       # (getattr would import scipy.linalg)
+                del scipy.linalg
+        sys.meta_path.insert(0, _AttachCythonBlas())
+    finally:
+        _imp.release_lock()
+
+
+class _AttachCythonBlas:
+    """Import hook, used once: the real scipy.linalg, when imported, gets the ``cython_blas``
+    attribute the import system would have set had it loaded the module itself."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name != "scipy.linalg":
+            return None
+        sys.meta_path.remove(self)
+        import importlib.util
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.loader is None:
+            return spec
+        execute = spec.loader.exec_module
+
+        def exec_module(module):
+            execute(module)
+            module.cython_blas = sys.modules["scipy.linalg.cython_blas"]
+
+        spec.loader.exec_module = exec_module
+        return spec
+
+
+_spent = [0.0]          # seconds in outermost Python-run kernels, this process
+_nesting = threading.local()     # .depth: Python-run kernels open in this thread (only the outermost is timed)
+_seen: dict = {}        # (module, qualname) -> set of argument descriptions, of Python-run kernels
+_policy = {"compile": os.environ.get("SNAPMEM_COLD", "interpret") == "compile"}
+
+
+def _interpret_when_uncached(kernel: "Kernel") -> bool:
+    return (kernel.options.get("cache", False) and not _policy["compile"]
+            and not kernel.__module__.startswith(ALWAYS_COMPILED))
+
+
+def _run_as_python(kernel: "Kernel", args):
+    depth = getattr(_nesting, "depth", 0)
+    if depth:
+        return kernel.py_func(*args)
+    key = (kernel.__module__, kernel.__qualname__)
+    if key not in _seen:
+        _seen[key] = set()
+        if len(_seen) == 1 and os.environ.get("SNAPMEM_BACKGROUND_COMPILE", "1") != "0":
+            atexit.register(compile_in_background)
+    try:
+        _seen[key].add(tuple(_describe(a) for a in args))
+    except TypeError:
+        pass                                  # an argument we cannot describe: not compiled ahead
+    import numpy as np
+    _nesting.depth = depth + 1
+    start = time.perf_counter()
+    try:
+        with np.errstate(all="ignore"):       # compiled kernels warn of no overflow (inf, NaN) either
+            return kernel.py_func(*args)
+    finally:
+        _nesting.depth = depth
+        _spent[0] += time.perf_counter() - start
+
+
+class compiling:
+    """``with compiling():`` every kernel called inside compiles (or loads) at its first call,
+    cached or not (``snapmem warmup`` uses it). Kernels already decided keep their way."""
+
+    def __enter__(self):
+        self._before = _policy["compile"]
+        _policy["compile"] = True
+
+    def __exit__(self, *exc):
+        _policy["compile"] = self._before
+
+
+def interpreted() -> list[str]:
+    """Qualified names of the kernels this process ran as Python (not in numba's cache yet)."""
+    return [f"{module}.{name}" for module, name in _seen]
+
+
+def _cache_dirs(source: str) -> list[str]:
+    """Where numba looks for a function's cache (numba.core.caching's locators, in order)."""
+    import hashlib
+    directory = os.path.dirname(os.path.abspath(source))
+    subpath = "_".join([os.path.basename(directory), hashlib.sha1(directory.encode()).hexdigest()])
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return [os.path.join(os.environ["NUMBA_CACHE_DIR"], subpath)]
+    user = os.path.join(os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "numba", subpath)
+    return [os.path.join(directory, "__pycache__"), user]
+
+
+def _in_cache(kernel: "Kernel") -> bool:
+    """Whether numba's cache holds an index for the kernel newer than its source (a cheap test, no
+    numba import: a stale or other-typed entry makes numba compile, which is only slower)."""
+    code = kernel.py_func.__code__
+    source = code.co_filename
+    base = "%s.%s-%d.py%d%d%s.nbi" % (os.path.splitext(os.path.basename(source))[0],
+                                      kernel.__qualname__.replace("<", "").replace(">", ""), code.co_firstlineno,
+                                      sys.version_info[0], sys.version_info[1], getattr(sys, "abiflags", ""))
+    try:
+        stamp = os.stat(source).st_mtime
+    except OSError:
+        return True
+    for directory in _cache_dirs(source):
+        try:
+            if os.stat(os.path.join(directory, base)).st_mtime >= stamp:
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def _describe(value):
+    """An argument's numba type, as plain data: ("a", dtype, ndim, layout, writeable) for an array,
+    ("t", items) for a tuple, ("s", type name) for a Python or numpy scalar."""
+    import numpy as np
+    if isinstance(value, np.ndarray):
+        layout = "C" if value.flags.c_contiguous else "F" if value.flags.f_contiguous else "A"
+        return ("a", value.dtype.str, value.ndim, layout, bool(value.flags.writeable))
+    if type(value) is tuple:
+        return ("t", tuple(_describe(v) for v in value))
+    if isinstance(value, (bool, int, float, complex, np.generic)) or value is None:
+        return ("s", type(value).__module__, type(value).__name__)
+    raise TypeError(type(value))
+
+
+def _example(description):
+    """A value of the numba type ``description`` names (for ``numba.typeof``)."""
+    import numpy as np
+    kind = description[0]
+    if kind == "a":
+        _, dtype, ndim, layout, writeable = description
+        shape = (3,) * ndim
+        value = np.zeros(shape, dtype=dtype, order="F" if layout == "F" else "C")
+        if layout == "A":
+            value = np.zeros((6,) + (3,) * (ndim - 1), dtype=dtype)[::2]
+        value.flags.writeable = writeable
+        return value
+    if kind == "t":
+        return tuple(_example(d) for d in description[1])
+    module, name = description[1], description[2]
+    if name == "NoneType":
+        return None
+    kind_type = getattr(np, name) if module == "numpy" else {"bool": bool, "int": int, "float": float,
+                                                              "complex": complex}[name]
+    return kind_type(0)
+
+
+def compile_in_background() -> None:
+    """Start a detached process that compiles, into numba's cache, the kernels this process ran as
+    Python, for the argument types they were called with (run at exit)."""
+    if not _seen:
+        return
+    import json
+    import subprocess
+    import tempfile
+    lock = _take_compile_lock()
+    if lock is None:
+        return                        # another process is compiling into this cache (a sweep's workers)
+    jobs = [[module, name, [list(map(_plain, d)) for d in descriptions]] for (module, name), descriptions in _seen.items()]
+    handle, path = tempfile.mkstemp(prefix="snapmem-compile-", suffix=".json")
+    with os.fdopen(handle, "w") as file:
+        json.dump(jobs, file)
+    environment = dict(os.environ, SNAPMEM_BACKGROUND_COMPILE="0")
+    try:
+        subprocess.Popen([sys.executable, "-c", "import sys; from snapmem._lazy import compile_jobs; "
+                          "compile_jobs(sys.argv[1], sys.argv[2])", path, lock], stdin=subprocess.DEVNULL,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                         env=environment)
+    except OSError:
+        os.unlink(path)
+        os.unlink(lock)
+
+
+#: A compile lock older than this [s] is left from a compile that died: taken over.
+STALE_LOCK = 900.0
+
+
+def _take_compile_lock() -> str | None:
+    """Create the lock file of background compiles into this cache; None if another holds it."""
+    import hashlib
+    import tempfile
+    place = os.environ.get("NUMBA_CACHE_DIR", "") + os.pathsep + os.path.dirname(os.path.abspath(__file__))
+    lock = os.path.join(tempfile.gettempdir(),
+                        f"snapmem-compile-{hashlib.sha1(place.encode()).hexdigest()[:16]}.lock")
+    for _ in range(2):
+        try:
+            os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+            return lock
+        except FileExistsError:
+            try:
+                if time.time() - os.stat(lock).st_mtime < STALE_LOCK:
+                    return None
+                os.unlink(lock)
+            except OSError:
+                return None
+        except OSError:
+            return None
+    return None
+
+
+def _plain(part):
+    return [_plain(p) for p in part] if isinstance(part, tuple) else part
+
+
+def _tupled(part):
+    return tuple(_tupled(p) for p in part) if isinstance(part, list) else part
+
+
+def compile_jobs(path: str, lock: str | None = None) -> list[tuple[str, float]]:
+    """Compile the kernels listed in a job file of :func:`compile_in_background` (then delete it,
+    and the ``lock`` file when done). Returns (kernel, seconds) for each."""
+    try:
+        return _compile_jobs(path)
+    finally:
+        if lock is not None and os.path.exists(lock):
+            os.unlink(lock)
+
+
+def _compile_jobs(path: str) -> list[tuple[str, float]]:
+    import json
+    import numba
+    with open(path) as file:
+        jobs = json.load(file)
+    os.unlink(path)
+    done = []
+    for module_name, qualname, descriptions in jobs:
+        kernel = importlib.import_module(module_name)
+        for part in qualname.split("."):
+            kernel = getattr(kernel, part)
+        dispatcher = kernel.dispatcher if isinstance(kernel, Kernel) else kernel
+        start = time.perf_counter()
+        for description in descriptions:
+            types_ = tuple(numba.typeof(_example(_tupled(d))) for d in description)
+            dispatcher.compile(types_)
+        done.append((f"{module_name}.{qualname}", time.perf_counter() - start))
+    return done
 
 
 def _rebind(kernel: "Kernel", dispatcher) -> None:
@@ -160,3 +479,4 @@ def njit(function=None, **options):
 def materialized() -> list[Kernel]:
     """The kernels whose dispatchers this process has made, in order."""
     return list(_made)
+

@@ -92,9 +92,10 @@ def warmup(everything: bool = False, report=None) -> list[Stage]:
     list of Stage
     """
     from numba.core import event
+    from snapmem._lazy import compiling
     stages = []
     for name, task in _tasks(everything):
-        with event.install_recorder("numba:compile") as recorder:
+        with compiling(), event.install_recorder("numba:compile") as recorder:
             start = time.perf_counter()
             task()
             seconds = time.perf_counter() - start

@@ -19,10 +19,10 @@ print(" ".join(m for m in {heavy!r} if m in sys.modules) or "none")
 """
 
 
-def loaded_after(run: str) -> str:
+def loaded_after(run: str, **environment) -> str:
     code = CHECK.format(run=run, heavy=HEAVY)
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}, timeout=120)
+                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", **environment}, timeout=120)
     assert done.returncode == 0, done.stderr
     return done.stdout.strip().splitlines()[-1]
 
@@ -40,8 +40,10 @@ def test_start_up_imports_no_numba_pandas_or_matplotlib(run):
 
 
 def test_a_command_loads_numba_when_it_computes():
-    assert "numba" in loaded_after("import snapmem\nsnapmem.equilibrium(snapmem.build_scene('balloon', nodes=11, "
-                                   "pressure=0.005))").split()
+    # SNAPMEM_COLD=compile: with an empty numba cache the kernels would run as Python (test_startup_cold.py)
+    loaded = loaded_after("import snapmem\nsnapmem.equilibrium(snapmem.build_scene('balloon', nodes=11, "
+                          "pressure=0.005))", SNAPMEM_COLD="compile").split()
+    assert "numba" in loaded and "scipy.linalg" not in loaded and "scipy.optimize" not in loaded
 
 
 def test_lazy_kernels_compile_on_first_call_and_call_each_other():
@@ -64,3 +66,11 @@ def test_lazy_kernels_compile_on_first_call_and_call_each_other():
     assert len(sum_of_squares.signatures) == 1
     assert {"sum_of_squares", "square"} <= {k.__name__ for k in _lazy.materialized()}
     assert type(square).__name__ == "CPUDispatcher"          # the callee, rebound for numba to type it
+
+
+def test_a_trace_imports_neither_scipy_optimize_nor_scipy_linalg():
+    # brentq is snapmem.kernels.roots' (scipy's, transcribed); numba gets scipy's BLAS table alone
+    loaded = loaded_after("from snapmem.cli import main\nwith contextlib.redirect_stdout(io.StringIO()):\n"
+                          "    main(['trace', 'balloon', '--set', 'nodes=21', '--until', 'stretch_max=2'])",
+                          SNAPMEM_COLD="compile").split()
+    assert "numba" in loaded and "scipy.optimize" not in loaded and "scipy.linalg" not in loaded

@@ -21,9 +21,8 @@ import logging
 import math
 
 import numpy as np
-import snapmem._lazy as _lazy
 
-brentq = _lazy.function("scipy.optimize", "brentq")     # scipy.optimize: imported at first use
+from snapmem.kernels.roots import brentq     # scipy.optimize.brentq bit for bit, without importing scipy.optimize
 
 from snapmem.continuation.branch import Point, PointKind
 from snapmem.continuation.modes import legendre_mode
