@@ -160,10 +160,13 @@ class Kernel:
 
 
 def _import_numba():
-    """``import numba``, with scipy's BLAS table loaded alone beforehand (:func:`_load_cython_blas`)."""
+    """``import numba``, with scipy's BLAS table loaded alone beforehand (:func:`_load_cython_blas`)
+    and snapmem's kernels stamped by all their sources (:mod:`snapmem._numba_cache`)."""
     if os.environ.get("SNAPMEM_FULL_SCIPY_LINALG", "0") != "1":
         _load_cython_blas()
     import numba
+    from snapmem._numba_cache import install
+    install()
     return numba
 
 
