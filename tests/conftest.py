@@ -1,3 +1,11 @@
+import os
+
+# The suite tests the compiled kernels: with an empty numba cache (a fresh clone) they would run as
+# Python at first (snapmem._lazy's first-use policy; tests/test_startup_cold.py tests that policy
+# in its own processes), and a detached compile would start when the suite exits.
+os.environ.setdefault("SNAPMEM_COLD", "compile")
+os.environ.setdefault("SNAPMEM_BACKGROUND_COMPILE", "0")
+
 import numpy as np
 import pytest
 

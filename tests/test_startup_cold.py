@@ -44,8 +44,15 @@ CASES = [("balloon", {"nodes": 31}, "pressure", {"stretch_max": 3.0}),
          ("torus", {"nodes": 21}, "E_hat", {"stretch_max": 1.2})]
 
 
+def first_use_environment(**environment) -> dict:
+    """This process's environment without conftest's SNAPMEM_COLD=compile: first-use policy as a user has it."""
+    env = {k: v for k, v in os.environ.items() if k != "SNAPMEM_COLD"}
+    env.update(PYTHONPATH=str(ROOT), **environment)
+    return env
+
+
 def run_trace(cases, cold: bool, **environment) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(ROOT), SNAPMEM_BACKGROUND_COMPILE="0", **environment)
+    env = first_use_environment(SNAPMEM_BACKGROUND_COMPILE="0", **environment)
     with tempfile.TemporaryDirectory() as cache:
         if cold:
             env["NUMBA_CACHE_DIR"] = cache
@@ -111,7 +118,7 @@ def test_argument_descriptions_rebuild_values_of_the_same_numba_type():
 
 @pytest.mark.slow
 def test_the_background_compile_fills_the_cache_for_the_next_process():
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = first_use_environment()
     code = ("import sys\nfrom snapmem import build_scene\nfrom snapmem.continuation import trace\n"
             "import snapmem._lazy as lazy\n"
             "trace(build_scene('balloon', nodes=21), 'pressure', until={'stretch_max': 2.0})\n"
