@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from snapmem.dynamics.compiled_chambers import (TARGET_GAS, TARGET_RESISTANCE, TARGET_VOLUME, ChamberCompiledStep,
+                                                chamber_target)
 from snapmem.dynamics.loads import PiecewiseLinear
 from snapmem.dynamics.stepper import EPS, _Recorder
 from snapmem.dynamics.trajectory import Trajectory
@@ -46,6 +48,10 @@ from snapmem.model.local_checks import failure_margins_many
 from snapmem.model.multi import MultiScene
 from snapmem.model.scene import Evaluation
 from snapmem.solvers.newton import newton
+
+
+#: The chambers' targets, one formula for both steps: the numpy step calls the kernel's Python form.
+_chamber_target = chamber_target.py_func
 
 
 def _suffix(c: int) -> str:
@@ -161,23 +167,27 @@ class ChamberState:
         out.update(zip(self.names, self.pressure.tolist()))
         return out
 
-    def target(self, j: int, loads: dict, h: float):
-        """p -> (V_c* [m^3], D = -dV_c*/dp [m^3/Pa]) of the j-th multiplied chamber at a solve's loads."""
+    def target_parameters(self, j: int, loads: dict) -> tuple:
+        """(kind, params) of the j-th multiplied chamber's target V_c*(p) at a solve's loads
+        (:func:`snapmem.dynamics.compiled_chambers.chamber_target`, which documents them)."""
         c = self.multiplied[j]
         ch, s = self.scene.chambers[c], _suffix(c)
         if ch.kind is ChamberKind.GAS:
-            amount = loads.get("gas_amount" + s, self.held[c])
-            return lambda p: (amount / (p + ch.p_atm), amount / (p + ch.p_atm) ** 2)
+            return TARGET_GAS, (float(loads.get("gas_amount" + s, self.held[c])), float(ch.p_atm))
         if c in self.fluid:
             resistance = loads.get("flow_resistance" + s)
             if resistance is None or not resistance > 0:
                 raise SnapmemError(f"flow_resistance{s} = {resistance}: chamber {c + 1} is fed through a "
                                    "resistance (source_pressure is a load); give flow_resistance > 0 [Pa s/m^3]")
             anchor, step, _ = self._anchors[c]
-            p_source = loads["source_pressure" + s]
-            return lambda p: (anchor + step * (p_source - p) / resistance, step / resistance)
-        volume = loads.get("fluid_volume" + s, self.held[c])
-        return lambda p: (volume, 0.0)
+            return TARGET_RESISTANCE, (float(anchor), float(step), float(loads["source_pressure" + s]),
+                                       float(resistance))
+        return TARGET_VOLUME, (float(loads.get("fluid_volume" + s, self.held[c])),)
+
+    def target(self, j: int, loads: dict, h: float):
+        """p -> (V_c* [m^3], D = -dV_c*/dp [m^3/Pa]) of the j-th multiplied chamber at a solve's loads."""
+        kind, params = self.target_parameters(j, loads)
+        return lambda p: _chamber_target(kind, params, p)
 
     def inadmissible(self, pressure: np.ndarray):
         for j, c in enumerate(self.multiplied):
@@ -234,9 +244,9 @@ class ChamberState:
 class ChamberStepper:
     """One implicit step on a :class:`MultiScene`: the backward-Euler solve of
     :class:`snapmem.dynamics.stepper._Stepper` bordered by the chambers' pressures (module
-    docstring), by Newton on the residual (a saddle point when a fluid's volume is prescribed)."""
-
-    compiled = None            # the numpy step; the compiled one knows a single meridian
+    docstring), by Newton on the residual (a saddle point when a fluid's volume is prescribed):
+    the whole solve in one compiled call (:mod:`snapmem.dynamics.compiled_chambers`) where the
+    scene's terms allow it (``compiled``; None: numpy Newton), numpy Newton otherwise."""
 
     def __init__(self, scene: MultiScene, mass: np.ndarray, damping: np.ndarray, options, chambers: ChamberState):
         self.scene, self.mass, self.damping, self.options, self.chambers = scene, mass, damping, options, chambers
@@ -248,6 +258,7 @@ class ChamberStepper:
         self._extended_free = np.concatenate([self.free, n + np.arange(k)])
         # the chamber rows in force units: a volume error of 1e-9 L^3 weighs as 1e-9 of the force scale
         self._row_scale = scene.force_scale / self._size ** 3
+        self.compiled = ChamberCompiledStep.of(scene, chambers.multiplied)
 
     def solve(self, q, v, h, loads, current=None):
         """y of the step of h from (q, v) at ``loads``, the chambers' pressures beside it; (y, report)."""
@@ -255,6 +266,17 @@ class ChamberStepper:
         n, k, s = scene.n_node_dofs, len(chambers.multiplied), self._row_scale
         inertia_free = self._mass_free / h ** 2 + self._damping_free / h
         momentum = self._mass_free * v[free] / h
+        tol = max(self.tol, 1e3 * EPS * float(inertia_free.max()) * self._size)
+        start = q + h * v
+        if scene.inadmissible(start) is not None:
+            start = q if current is None else current
+        if self.compiled is not None:
+            done = self.compiled.solve(q, start, chambers.pressure, inertia_free, momentum, loads,
+                                       [chambers.target_parameters(j, loads) for j in range(k)], s, tol,
+                                       self.options.newton)
+            if done is not None:
+                y, chambers.solved, report = done
+                return y, report
         targets = [chambers.target(j, loads, h) for j in range(k)]
 
         def assemble(x):
@@ -274,11 +296,7 @@ class ChamberStepper:
             J = BorderedMatrix(K, -G, -s * G, -s * D)
             return Evaluation(0.0, None, np.concatenate([residual, rows]), J, ev.residual_floor)
 
-        start = q + h * v
-        if scene.inadmissible(start) is not None:
-            start = q if current is None else current
         x0 = np.concatenate([start, chambers.pressure])
-        tol = max(self.tol, 1e3 * EPS * float(inertia_free.max()) * self._size)
 
         def inadmissible(x):
             return scene.inadmissible(x[:n]) or chambers.inadmissible(x[n:])
