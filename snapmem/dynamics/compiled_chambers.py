@@ -153,18 +153,21 @@ def _assemble_all(x, n, anchor, inertia, momentum, plans, laws, linears, a_el, m
 
 
 @njit(cache=True, nogil=True)
-def chamber_time_step(anchor, start, pressure0, inertia, momentum, free, plans, laws, linears, a_el, mem_unknown,
+def chamber_time_step(anchor, guess, fallback, pressure0, inertia, momentum, free, plans, laws, linears, a_el, mem_unknown,
                       mem_sign, mem_pressure, offsets, free_offsets, dead, kinds, tparams, row_scale, bandwidth, tol,
                       max_iterations, max_cuts):
-    """One bordered time step (module docstring): Newton from (``start``, ``pressure0``) with the
+    """One bordered time step (module docstring): Newton from (``guess``, or ``fallback`` if the
+    guess is outside the membranes' domain, and ``pressure0``) with the
     rules of snapmem.solvers.newton.newton(merit='residual'), ``free`` the stacked free degrees of
     freedom, ``tol`` [N] the step's tolerance. Returns (x = (y, p), code, iterations, cuts, norm),
     code one of snapmem.dynamics.compiled_newton's (HANDED_BACK: the band's LDL^T failed)."""
     n, k = anchor.size, dead.size
     N = free.size
     x = np.empty(n + k)
-    x[:n] = start
+    x[:n] = guess
     x[n:] = pressure0
+    if not _inside(x, n, plans, laws, linears, offsets, mem_unknown, mem_sign, dead, kinds, tparams, False):
+        x[:n] = fallback
     if not _inside(x, n, plans, laws, linears, offsets, mem_unknown, mem_sign, dead, kinds, tparams, True):
         return x, START_OUTSIDE, 0, 0, np.nan
     residual, lower, border, corner, floor = _assemble_all(x, n, anchor, inertia, momentum, plans, laws, linears, a_el,
@@ -282,7 +285,7 @@ class ChamberCompiledStep:
             return None                                   # contacts on some membranes only: the numpy step
         return cls(scene, steps, linears, list(multiplied))
 
-    def solve(self, anchor, start, pressure0, inertia, momentum, loads, targets, row_scale, tol, options):
+    def solve(self, anchor, guess, fallback, pressure0, inertia, momentum, loads, targets, row_scale, tol, options):
         """(y, pressures, NewtonReport) of the step, or None to hand it back to the numpy step.
 
         ``targets``: (kind, params) of every multiplied chamber (``ChamberState.target_parameters``);
@@ -301,7 +304,8 @@ class ChamberCompiledStep:
         for j, (_, params) in enumerate(targets):
             tparams[j, : len(params)] = params
         x, code, iterations, cuts, norm = chamber_time_step(
-            np.ascontiguousarray(anchor, dtype=float), np.ascontiguousarray(start, dtype=float),
+            np.ascontiguousarray(anchor, dtype=float), np.ascontiguousarray(guess, dtype=float),
+            np.ascontiguousarray(fallback, dtype=float),
             np.ascontiguousarray(pressure0, dtype=float), inertia, momentum, self.free, self.plans, self.laws,
             self.linears, a_el, self.mem_unknown, self.mem_sign, mem_pressure, self.offsets, self.free_offsets,
             self.dead, kinds, tparams, float(row_scale), self.bandwidth, float(tol), options.max_iterations,

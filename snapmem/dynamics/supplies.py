@@ -268,15 +268,16 @@ class ChamberStepper:
         momentum = self._mass_free * v[free] / h
         tol = max(self.tol, 1e3 * EPS * float(inertia_free.max()) * self._size)
         start = q + h * v
-        if scene.inadmissible(start) is not None:
-            start = q if current is None else current
-        if self.compiled is not None:
-            done = self.compiled.solve(q, start, chambers.pressure, inertia_free, momentum, loads,
+        fallback = q if current is None else current
+        if self.compiled is not None:          # (it checks the guess itself)
+            done = self.compiled.solve(q, start, fallback, chambers.pressure, inertia_free, momentum, loads,
                                        [chambers.target_parameters(j, loads) for j in range(k)], s, tol,
                                        self.options.newton)
             if done is not None:
                 y, chambers.solved, report = done
                 return y, report
+        if scene.inadmissible(start) is not None:
+            start = fallback
         targets = [chambers.target(j, loads, h) for j in range(k)]
 
         def assemble(x):
