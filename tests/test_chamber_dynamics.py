@@ -272,3 +272,24 @@ def test_the_compiled_chamber_step_relaxes_a_resistance_fed_balloon_as_the_numpy
     compiled, numpy_run = _both_steps(monkeypatch, make_run)
     _agree_to_round_off(compiled, numpy_run, ["load_pressure", "volume", "fluid_volume_state"])
     assert (compiled["volume"][-1] - V0) / (V1 - V0) == pytest.approx(1.0 - math.exp(-0.5), rel=0.02)  # filling
+
+
+def test_the_compiled_chamber_step_runs_a_prescribed_pressure_chamber_and_a_fluid_one_side_by_side(monkeypatch):
+    """Two balloons, one under a prescribed pressure (a load, no border) and one on a fluid chamber:
+    the pressure-driven one creeps towards its equilibrium at that pressure, as the numpy step."""
+    params = get_spec("two_balloons").resolve(nodes=21)
+    membranes = [balloon_membrane(params, (), 10.0, "pressed"), balloon_membrane(params, (), 10.0, "held")]
+    p = float(balloon_pressure(1.3))
+    scene = MultiScene(membranes, [Chamber("pressure", (0,), pressure=p), Chamber("volume", (1,))], name="pair")
+    first, second = scene.split(scene.reference_state())
+    q0 = np.concatenate([1.2 * first, 1.25 * second])
+
+    def make_run():
+        return simulate(scene, {}, t_end=200.0, rho=1.0, damping=0.5, q0=q0,
+                        options=DynamicsOptions(scheme="bdf2", tol=1e-4, dt=1e-2, dt_max=5.0))
+    compiled, numpy_run = _both_steps(monkeypatch, make_run)
+    _agree_to_round_off(compiled, numpy_run, ["load_pressure_2", "volume_1", "volume_2", "stretch_1"])
+    rest = equilibrium(membranes[0], {"pressure": p})         # the pressed balloon's equilibrium at p
+    settled = membranes[0].volume(rest.q)
+    assert abs(compiled["volume_1"][-1] - settled) < 0.1 * abs(compiled["volume_1"][0] - settled)   # creeping there
+    assert np.ptp(compiled["volume_2"]) < 1e-9 * compiled["volume_2"][0]  # the fluid's volume held
