@@ -204,3 +204,92 @@ def test_an_interrupted_chamber_run_keeps_its_frames_and_the_chambers_columns():
         assert traj[key][-1] == pytest.approx(measured[key], rel=1e-12), key
     np.testing.assert_allclose(traj["rupture_margin"], 3.0 / traj["stretch_max_1"], rtol=1e-12)
     assert np.all(traj["breakdown_margin_1"] == np.inf)                 # no breakdown strength set
+
+
+# ------------------------------------------------------------------------------------------------
+# the compiled bordered step (snapmem.dynamics.compiled_chambers) against the numpy step
+def _both_steps(monkeypatch, make_run):
+    """(compiled run, numpy run) of make_run(), the numpy one with the compiled step refused; the
+    first must have taken the compiled step."""
+    import snapmem.dynamics.supplies as supplies
+    seen = []
+    original = supplies.ChamberStepper.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        seen.append(self.compiled)
+    with monkeypatch.context() as patch:
+        patch.setattr(supplies.ChamberStepper, "__init__", spy)
+        compiled = make_run()
+        patch.setattr(supplies.ChamberCompiledStep, "of", classmethod(lambda cls, scene, multiplied: None))
+        numpy_run = make_run()
+    assert seen[0] is not None and seen[-1] is None
+    return compiled, numpy_run
+
+
+def _agree_to_round_off(a, b, columns):
+    assert a.meta["status"] == b.meta["status"] == "completed"
+    assert a.meta["steps"] == b.meta["steps"] and a.meta["rejected"] == b.meta["rejected"]
+    np.testing.assert_allclose(a["t"], b["t"], rtol=1e-9, atol=0)      # the step control amplifies rounding
+    scale = np.abs(b["q"]).max()
+    assert np.abs(a["q"] - b["q"]).max() < 1e-10 * scale
+    for key in list(columns) + ["potential", "total", "chamber_energy", "volume"]:   # the frames' measures too
+        np.testing.assert_allclose(a[key], b[key], rtol=1e-9, atol=1e-12 * np.abs(b[key]).max(), err_msg=key)
+
+
+def test_the_compiled_chamber_step_takes_pump2s_steps_as_the_numpy_step_to_round_off(monkeypatch):
+    from snapmem.catalog.robots import run
+    compiled, numpy_run = _both_steps(monkeypatch, lambda: run("pump2", t_end=13.0))     # past the snap (12.6 s)
+    _agree_to_round_off(compiled, numpy_run, ["load_pressure", "volume_1", "volume_2", "kinetic_1"])
+    assert compiled["volume_1"].max() > 0.2                      # it did snap (0.0026 -> 0.27 m^3)
+
+
+@pytest.mark.parametrize("chamber", ["volume", "gas"])
+def test_the_compiled_chamber_step_empties_the_smaller_balloon_as_the_numpy_step(monkeypatch, chamber):
+    scene = build_scene("two_balloons", nodes=21, R1=10.0, R2=10.5, chamber=chamber)
+    q0 = 1.6 * scene.reference_state()
+
+    def make_run():
+        return simulate(scene, {}, t_end=300.0, rho=1.0, damping=0.3, q0=q0,
+                        options=DynamicsOptions(scheme="euler", tol=1e-3, dt=1e-2, dt_max=100.0))
+    compiled, numpy_run = _both_steps(monkeypatch, make_run)
+    _agree_to_round_off(compiled, numpy_run, ["load_pressure", "volume_1", "volume_2", "stretch_1", "stretch_2"])
+    assert compiled["stretch_1"][-1] < 1.6 < compiled["stretch_2"][-1]      # it got to the emptying
+
+
+def test_the_compiled_chamber_step_relaxes_a_resistance_fed_balloon_as_the_numpy_step(monkeypatch):
+    scene = one_balloon(21)
+    p0 = float(balloon_pressure(1.2))
+    dp = 1e-3 * p0
+    start, end = equilibrium(scene.membranes[0], {"pressure": p0}), equilibrium(scene.membranes[0], {"pressure": p0 + dp})
+    V0, V1 = (scene.membranes[0].volume(e.q) for e in (start, end))
+    resistance = 100.0 * dp / (V1 - V0)                               # tau = 100 s
+
+    def make_run():
+        return simulate(scene, {"source_pressure": p0 + dp, "flow_resistance": resistance, "pressure": p0},
+                        t_end=50.0, rho=1e-3, damping=1.0, q0=start.q,
+                        options=DynamicsOptions(scheme="bdf2", tol=1e-5, dt=1e-2, dt_max=2.0))
+    compiled, numpy_run = _both_steps(monkeypatch, make_run)
+    _agree_to_round_off(compiled, numpy_run, ["load_pressure", "volume", "fluid_volume_state"])
+    assert (compiled["volume"][-1] - V0) / (V1 - V0) == pytest.approx(1.0 - math.exp(-0.5), rel=0.02)  # filling
+
+
+def test_the_compiled_chamber_step_runs_a_prescribed_pressure_chamber_and_a_fluid_one_side_by_side(monkeypatch):
+    """Two balloons, one under a prescribed pressure (a load, no border) and one on a fluid chamber:
+    the pressure-driven one creeps towards its equilibrium at that pressure, as the numpy step."""
+    params = get_spec("two_balloons").resolve(nodes=21)
+    membranes = [balloon_membrane(params, (), 10.0, "pressed"), balloon_membrane(params, (), 10.0, "held")]
+    p = float(balloon_pressure(1.3))
+    scene = MultiScene(membranes, [Chamber("pressure", (0,), pressure=p), Chamber("volume", (1,))], name="pair")
+    first, second = scene.split(scene.reference_state())
+    q0 = np.concatenate([1.2 * first, 1.25 * second])
+
+    def make_run():
+        return simulate(scene, {}, t_end=200.0, rho=1.0, damping=0.5, q0=q0,
+                        options=DynamicsOptions(scheme="bdf2", tol=1e-4, dt=1e-2, dt_max=5.0))
+    compiled, numpy_run = _both_steps(monkeypatch, make_run)
+    _agree_to_round_off(compiled, numpy_run, ["load_pressure_2", "volume_1", "volume_2", "stretch_1"])
+    rest = equilibrium(membranes[0], {"pressure": p})         # the pressed balloon's equilibrium at p
+    settled = membranes[0].volume(rest.q)
+    assert abs(compiled["volume_1"][-1] - settled) < 0.1 * abs(compiled["volume_1"][0] - settled)   # creeping there
+    assert np.ptp(compiled["volume_2"]) < 1e-9 * compiled["volume_2"][0]  # the fluid's volume held

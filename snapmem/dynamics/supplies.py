@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from snapmem.dynamics.compiled_chambers import (TARGET_GAS, TARGET_RESISTANCE, TARGET_VOLUME, ChamberCompiledStep,
+                                                chamber_target)
 from snapmem.dynamics.loads import PiecewiseLinear
 from snapmem.dynamics.stepper import EPS, _Recorder
 from snapmem.dynamics.trajectory import Trajectory
@@ -46,6 +48,10 @@ from snapmem.model.local_checks import failure_margins_many
 from snapmem.model.multi import MultiScene
 from snapmem.model.scene import Evaluation
 from snapmem.solvers.newton import newton
+
+
+#: The chambers' targets, one formula for both steps: the numpy step calls the kernel's Python form.
+_chamber_target = chamber_target.py_func
 
 
 def _suffix(c: int) -> str:
@@ -161,23 +167,27 @@ class ChamberState:
         out.update(zip(self.names, self.pressure.tolist()))
         return out
 
-    def target(self, j: int, loads: dict, h: float):
-        """p -> (V_c* [m^3], D = -dV_c*/dp [m^3/Pa]) of the j-th multiplied chamber at a solve's loads."""
+    def target_parameters(self, j: int, loads: dict) -> tuple:
+        """(kind, params) of the j-th multiplied chamber's target V_c*(p) at a solve's loads
+        (:func:`snapmem.dynamics.compiled_chambers.chamber_target`, which documents them)."""
         c = self.multiplied[j]
         ch, s = self.scene.chambers[c], _suffix(c)
         if ch.kind is ChamberKind.GAS:
-            amount = loads.get("gas_amount" + s, self.held[c])
-            return lambda p: (amount / (p + ch.p_atm), amount / (p + ch.p_atm) ** 2)
+            return TARGET_GAS, (float(loads.get("gas_amount" + s, self.held[c])), float(ch.p_atm))
         if c in self.fluid:
             resistance = loads.get("flow_resistance" + s)
             if resistance is None or not resistance > 0:
                 raise SnapmemError(f"flow_resistance{s} = {resistance}: chamber {c + 1} is fed through a "
                                    "resistance (source_pressure is a load); give flow_resistance > 0 [Pa s/m^3]")
             anchor, step, _ = self._anchors[c]
-            p_source = loads["source_pressure" + s]
-            return lambda p: (anchor + step * (p_source - p) / resistance, step / resistance)
-        volume = loads.get("fluid_volume" + s, self.held[c])
-        return lambda p: (volume, 0.0)
+            return TARGET_RESISTANCE, (float(anchor), float(step), float(loads["source_pressure" + s]),
+                                       float(resistance))
+        return TARGET_VOLUME, (float(loads.get("fluid_volume" + s, self.held[c])),)
+
+    def target(self, j: int, loads: dict, h: float):
+        """p -> (V_c* [m^3], D = -dV_c*/dp [m^3/Pa]) of the j-th multiplied chamber at a solve's loads."""
+        kind, params = self.target_parameters(j, loads)
+        return lambda p: _chamber_target(kind, params, p)
 
     def inadmissible(self, pressure: np.ndarray):
         for j, c in enumerate(self.multiplied):
@@ -234,9 +244,10 @@ class ChamberState:
 class ChamberStepper:
     """One implicit step on a :class:`MultiScene`: the backward-Euler solve of
     :class:`snapmem.dynamics.stepper._Stepper` bordered by the chambers' pressures (module
-    docstring), by Newton on the residual (a saddle point when a fluid's volume is prescribed)."""
-
-    compiled = None            # the numpy step; the compiled one knows a single meridian
+    docstring), by Newton on the residual (a saddle point when a fluid's volume is prescribed):
+    the whole solve in one compiled call (:mod:`snapmem.dynamics.compiled_chambers`) where the
+    scene's terms allow it (``compiled``, else None), numpy Newton otherwise and for a step the
+    compiled one hands back."""
 
     def __init__(self, scene: MultiScene, mass: np.ndarray, damping: np.ndarray, options, chambers: ChamberState):
         self.scene, self.mass, self.damping, self.options, self.chambers = scene, mass, damping, options, chambers
@@ -248,6 +259,7 @@ class ChamberStepper:
         self._extended_free = np.concatenate([self.free, n + np.arange(k)])
         # the chamber rows in force units: a volume error of 1e-9 L^3 weighs as 1e-9 of the force scale
         self._row_scale = scene.force_scale / self._size ** 3
+        self.compiled = ChamberCompiledStep.of(scene, chambers.multiplied)
 
     def solve(self, q, v, h, loads, current=None):
         """y of the step of h from (q, v) at ``loads``, the chambers' pressures beside it; (y, report)."""
@@ -255,6 +267,18 @@ class ChamberStepper:
         n, k, s = scene.n_node_dofs, len(chambers.multiplied), self._row_scale
         inertia_free = self._mass_free / h ** 2 + self._damping_free / h
         momentum = self._mass_free * v[free] / h
+        tol = max(self.tol, 1e3 * EPS * float(inertia_free.max()) * self._size)
+        start = q + h * v
+        fallback = q if current is None else current
+        if self.compiled is not None:          # (it checks the guess itself)
+            done = self.compiled.solve(q, start, fallback, chambers.pressure, inertia_free, momentum, loads,
+                                       [chambers.target_parameters(j, loads) for j in range(k)], s, tol,
+                                       self.options.newton)
+            if done is not None:
+                y, chambers.solved, report = done
+                return y, report
+        if scene.inadmissible(start) is not None:
+            start = fallback
         targets = [chambers.target(j, loads, h) for j in range(k)]
 
         def assemble(x):
@@ -274,11 +298,7 @@ class ChamberStepper:
             J = BorderedMatrix(K, -G, -s * G, -s * D)
             return Evaluation(0.0, None, np.concatenate([residual, rows]), J, ev.residual_floor)
 
-        start = q + h * v
-        if scene.inadmissible(start) is not None:
-            start = q if current is None else current
         x0 = np.concatenate([start, chambers.pressure])
-        tol = max(self.tol, 1e3 * EPS * float(inertia_free.max()) * self._size)
 
         def inadmissible(x):
             return scene.inadmissible(x[:n]) or chambers.inadmissible(x[n:])
@@ -302,49 +322,70 @@ class ChamberRecorder(_Recorder):
     probes (``stretch_i``, ``deflection_i``) and its nodes ``r_i``, ``z_i`` [m] (``r``, ``z``: the
     first membrane's; ``breakdown_margin``, ``rupture_margin``: the smallest over the membranes)."""
 
-    def __init__(self, scene: MultiScene, mass, interval: float, chambers: ChamberState):
+    def __init__(self, scene: MultiScene, mass, interval: float, chambers: ChamberState, compiled=None):
         self.scene, self.mass, self.interval, self.compiled, self.internal = scene, mass, interval, None, None
         self.chambers = chambers
+        self.steps = None if compiled is None else compiled.steps     # the membranes' compiled steps
         self.contacts = ()
         self.rows = []
         self.last_t = -np.inf
         self.min_gap = np.inf
 
-    def chamber_energy(self, q, loads) -> float:
-        """The chambers' own energy [J] at state q and loads (the pressures being the frame's)."""
+    def chamber_energy(self, volumes, loads) -> float:
+        """The chambers' own energy [J] at their volumes [m^3] (one per chamber) and loads (the
+        pressures being the frame's)."""
         scene, total = self.scene, 0.0
-        for c, ch in enumerate(scene.chambers):
-            volume = scene.chamber_volume(q, c)
+        for c, (ch, volume) in enumerate(zip(scene.chambers, volumes)):
             if ch.kind is ChamberKind.GAS:
                 total += gas_energy(volume, loads.get("gas_amount" + _suffix(c), self.chambers.held[c]), ch.p_atm)
             elif ch.kind is ChamberKind.PRESSURE:
                 total -= loads[scene.pressure_name(c)] * volume
         return total
 
+    def frames_energy_and_volumes(self, Q: np.ndarray, loads: list) -> tuple:
+        """The membranes' energy without the chambers' pressure work (T,) [J], every membrane's
+        volume (M, T) and every chamber's (C, T) [m^3] at the frames Q (T, n_dof): by the
+        membranes' compiled measures (one call per membrane) when the run's step is compiled."""
+        scene = self.scene
+        parts = [np.ascontiguousarray(Q[:, a:b]) for a, b in zip(scene.offsets[:-1], scene.offsets[1:])]
+        if self.steps is None:
+            unpressed = [{**each, **{scene.pressure_name(c): 0.0 for c in range(len(scene.chambers))}}
+                         for each in loads]
+            energy = np.array([scene.energy(q, each) for q, each in zip(Q, unpressed)])
+            own = np.array([[m.volume(qi) for qi in Qi] for m, Qi in zip(scene.membranes, parts)])
+            chambers = np.array([[scene.chamber_volume(q, c) for q in Q] for c in range(len(scene.chambers))])
+            return energy, own, chambers.reshape(len(scene.chambers), len(Q))
+        energy, own = np.zeros(len(Q)), []
+        for i, (step, Qi) in enumerate(zip(self.steps, parts)):
+            each = [{"pressure": 0.0, "voltage": frame.get(f"voltage_{i + 1}", 0.0)} for frame in loads]
+            e, v = step.measures_many(Qi, each)[:2]
+            energy += e
+            own.append(v)
+        chambers = [ch.dead_volume + sum(s * own[i] for i, s in zip(ch.membranes, ch.signs)) for ch in scene.chambers]
+        return energy, np.array(own), np.array(chambers).reshape(len(scene.chambers), len(Q))
+
     def trajectory(self, meta) -> Trajectory:
         scene = self.scene
         loads = [row["loads"] for row in self.rows]
         data = {k: np.array([row[k] for row in self.rows]) for k in self.rows[0] if k != "loads"}
-        unpressed = [{**each, **{scene.pressure_name(c): 0.0 for c in range(len(scene.chambers))}} for each in loads]
-        membranes = np.array([scene.energy(q, each) for q, each in zip(data["q"], unpressed)])
-        chambers = np.array([self.chamber_energy(q, each) for q, each in zip(data["q"], loads)])
+        membranes, own_volumes, chamber_volumes = self.frames_energy_and_volumes(data["q"], loads)
+        chambers = np.array([self.chamber_energy(volumes, each) for volumes, each in zip(chamber_volumes.T, loads)])
         potential = membranes + chambers
         data.update(potential=potential, chamber_energy=chambers, total=data["kinetic"] + potential,
-                    volume=np.array([scene.volume(q) for q in data["q"]]))
+                    volume=chamber_volumes[0] if scene.chambers else own_volumes[0])
         for c in range(1, len(scene.chambers)):
-            data[f"volume_chamber_{c + 1}"] = np.array([scene.chamber_volume(q, c) for q in data["q"]])
+            data[f"volume_chamber_{c + 1}"] = chamber_volumes[c]
         names = sorted({name for each in loads for name in each})
         for name in names:
             data["load_" + name] = np.array([each.get(name, np.nan) for each in loads])
         for c, ch in enumerate(scene.chambers):      # a gas' pressure: its law at the frame's own state
             if ch.kind is ChamberKind.GAS:
                 amount = [each.get("gas_amount" + _suffix(c), self.chambers.held[c]) for each in loads]
-                volume = np.array([scene.chamber_volume(q, c) for q in data["q"]])
-                data["load_" + scene.pressure_name(c)] = np.array(amount) / volume - ch.p_atm
+                data["load_" + scene.pressure_name(c)] = np.array(amount) / chamber_volumes[c] - ch.p_atm
         for i, m in enumerate(scene.membranes):
             part = slice(scene.offsets[i], scene.offsets[i + 1])
             Q = data["q"][:, part]
-            data[f"volume_{i + 1}"] = np.array([m.volume(qi) for qi in Q])
+            data[f"volume_{i + 1}"] = own_volumes[i]
             data[f"kinetic_{i + 1}"] = 0.5 * np.einsum("tj,j,tj->t", data["v"][:, part], self.mass[part],
                                                        data["v"][:, part])
             for name, probe in m.probes.items():
@@ -376,5 +417,5 @@ def chamber_parts(scene: MultiScene, mass, damping, options, q0: np.ndarray, loa
         raise SnapmemError(f"scene {scene.name!r}: rigid bodies in a multi-membrane run are not supported")
     state = ChamberState(scene, q0, loads0)
     stepper = ChamberStepper(scene, mass, damping, options, state)
-    return stepper, state, (lambda scene, mass, interval, compiled, internal: ChamberRecorder(scene, mass, interval,
-                                                                                               state))
+    return stepper, state, (lambda scene, mass, interval, compiled, internal: ChamberRecorder(
+        scene, mass, interval, state, stepper.compiled))
