@@ -247,10 +247,11 @@ class MultiScene:
 
     def same_as(self, i: int, states: Sequence[np.ndarray], loads: Mapping[str, float] | None = None):
         """The earlier membrane whose evaluation membrane i has in ``states`` (the membranes'
-        states, :meth:`split`) under ``loads`` (resolved): its twin (:meth:`twin_of`) if both are in
-        the same state bitwise and carry the same loads of their own, else None."""
+        states, :meth:`split`) under ``loads`` (resolved; None: whatever does not depend on them,
+        volume and domain): its twin (:meth:`twin_of`) if both are in the same state bitwise and
+        carry the same loads of their own, else None."""
         twin = self.twin_of()[i]
-        if twin is None or not np.array_equal(states[i], states[twin]):
+        if twin is None or states[i].tobytes() != states[twin].tobytes():     # bitwise (0.0 and -0.0 differ)
             return None
         if loads is not None and self.membrane_loads(i, loads) != self.membrane_loads(twin, loads):
             return None
