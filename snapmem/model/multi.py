@@ -84,6 +84,7 @@ class MultiScene:
                 raise SnapmemError(f"membrane {i + 1} has rigid bodies: not supported in a multi-membrane scene")
         sizes = [m.reference_state().size for m in self.membranes]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        self._slices = [slice(int(a), int(b)) for a, b in zip(self.offsets[:-1], self.offsets[1:])]
         self.free = np.concatenate([m.free + o for m, o in zip(self.membranes, self.offsets)])
         self.free_offsets = np.concatenate([[0], np.cumsum([m.n_free for m in self.membranes])]).astype(int)
         self.bandwidth = max(m.bandwidth for m in self.membranes)
@@ -168,7 +169,7 @@ class MultiScene:
 
     def split(self, q: np.ndarray) -> list:
         """The membranes' states (views of q)."""
-        return [q[a:b] for a, b in zip(self.offsets[:-1], self.offsets[1:])]
+        return [q[s] for s in self._slices]
 
     def supply_load_names(self) -> tuple:
         """The loads a time schedule may add to a scene's (:mod:`snapmem.dynamics.supplies`), per
