@@ -359,6 +359,12 @@ def test_fast_options_locate_the_default_traces_points(pairs):
     fast, fast_child = study.timed_pair(101)
     assert len(fast.table) + len(fast_child.table) < 0.6 * (len(branch.table) + len(child.table))
     assert list(fast.points["kind"]) == list(branch.points["kind"]) == ["BP", "BP"]
+    # a pitchfork by the exchange symmetry: a = c = 0 to rounding at either BP location (the null
+    # vector and the known tangent are made exactly antisymmetric and symmetric there), not only
+    # where the eigenvalue iteration's rounding happens to be symmetric (c was 3e-6 here without)
+    for half in (child, fast_child):
+        switch = half.stats["switch"]
+        assert abs(switch["a"]) < 1e-14 * abs(switch["b"]) and abs(switch["c"]) < 1e-14 * abs(switch["b"]), switch
     for column in ("control", "pressure", "stretch_1"):
         assert np.allclose(fast.points[column], branch.points[column], rtol=1e-11, atol=0), column
         assert fast_child.limit_points()[column].iloc[0] == pytest.approx(child.limit_points()[column].iloc[0],
