@@ -227,10 +227,11 @@ def mirror_branch(child: Branch, pb, perm: np.ndarray) -> Branch:
     Not computed: its tables carry ``mirrored`` = True, its ``stats['mirror_of']`` is the sign of
     the half it is the image of, and its Newton counts are zero."""
     def swapped(table):
-        out = table.copy()
+        names = {}
         for col in table.columns:
             if col.endswith("_1") and col[:-2] + "_2" in table.columns:
-                out[col], out[col[:-2] + "_2"] = table[col[:-2] + "_2"].values, table[col].values
+                names[col], names[col[:-2] + "_2"] = col[:-2] + "_2", col
+        out = table.rename(columns=names)[list(table.columns)]       # one relabelling, columns in place
         out["mirrored"] = True
         return out
 
