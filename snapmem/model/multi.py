@@ -217,7 +217,8 @@ class MultiScene:
         stiffness and measures at a deformed probe state. Such a membrane in the same state as its
         twin (bitwise, under the same loads) has the same evaluation: the scene takes its twin's
         (:meth:`same_as`), which is how the symmetric states of two identical balloons cost one
-        balloon's evaluation, with the same numbers to the last bit."""
+        balloon's evaluation, with the same numbers to the last bit. Found at the first call and
+        kept: a membrane changed in place afterwards needs ``_twins = None`` again."""
         if not self.reuse_identical:
             return (None,) * len(self.membranes)
         if self._twins is None:
