@@ -10,9 +10,14 @@ cross. The exact curves (snapmem.reference.two_balloons) are drawn under the com
 
 Writes two_balloons.csv (the BPs' and the fold's V and p at N = 51, 101, 201 against the exact
 values: relative error and observed order, expected 2), two_balloons.branches.csv (the branches at
-N = 101) and two_balloons.png.
+N = 101) and two_balloons.png. ``--speed`` times the must-show run instead (:func:`timed_pair`:
+the symmetric branch through both BPs and the asymmetric half to its fold at N = 101, median of 5
+warm runs in-process) and writes two_balloons.speed.csv.
 """
 
+
+import statistics
+import time
 
 import numpy as np
 import pandas as pd
@@ -45,6 +50,43 @@ def pair_branches(nodes: int, R2: float = 10.0) -> dict:
         for direction, child in halves:
             out[f"asymmetric BP{k + 1} {'+' if direction > 0 else '-'}"] = child
     return out
+
+
+#: Options of the timed run: the corrector aims at 5 Newton iterations instead of 3, so the step
+#: grows on the smooth stretches between critical points (about half as many points). The points
+#: located on the way (BPs, fold, the end) do not depend on the steps: they are the default trace's
+#: to 1e-12 relative (tests/test_chambers.py).
+FAST = ContinuationOptions(target_iterations=5)
+
+
+def timed_pair(nodes: int = 101, options: ContinuationOptions = FAST) -> tuple:
+    """(the symmetric branch to stretch_max 2.8, through both BPs; the asymmetric half switched at
+    the first BP, to its fold) of two identical balloons at ``nodes``: the must-show run."""
+    scene = build_scene("two_balloons", nodes=nodes)
+    main = trace(scene, "volume", until={"stretch_max": 2.8}, options=options)
+    switched = ContinuationOptions(**{**options.__dict__, "stop_at_first_limit": True, "max_steps": 200})
+    (_, half), *_ = switch_at(scene, "volume", main.critical_state(0), options=switched)
+    return main, half
+
+
+def speed(nodes: int = 101, repeats: int = 5) -> pd.DataFrame:
+    """Median wall and CPU time [s] of :func:`timed_pair` over ``repeats`` warm runs, with the
+    default options and with :data:`FAST`, and each run's points and Newton iterations."""
+    rows = []
+    for name, options in (("default", ContinuationOptions()), ("fast", FAST)):
+        main, half = timed_pair(nodes, options)                  # warm: compiled kernels, caches
+        wall, cpu = [], []
+        for _ in range(repeats):
+            t0, c0 = time.perf_counter(), time.process_time()
+            timed_pair(nodes, options)
+            wall.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
+        rows.append({"options": name, "nodes": nodes, "wall_s": statistics.median(wall),
+                     "cpu_s": statistics.median(cpu), "points": len(main.table) + len(half.table),
+                     "newton": main.stats["newton_iterations"] + half.stats["newton_iterations"],
+                     "bp1_volume": main.points["control"].iloc[0], "bp2_volume": main.points["control"].iloc[1],
+                     "fold_volume": half.limit_points()["control"].iloc[0]})
+    return pd.DataFrame(rows)
 
 
 def errors(sizes) -> pd.DataFrame:
@@ -130,7 +172,13 @@ def draw(t: pd.DataFrame, path) -> None:
 
 
 def main(argv=None):
-    args = parse_args(__doc__, argv)
+    args = parse_args(__doc__, argv, lambda p: p.add_argument("--speed", action="store_true",
+                                                             help="time the must-show run (N = 101) only"))
+    if args.speed:
+        table = speed()
+        save(args, "two_balloons.speed", table)
+        print(table.to_string(index=False))
+        return table
     sizes = [51, 101] if args.quick else [51, 101, 201]
     table = errors(sizes)
     save(args, "two_balloons", table, sizes=sizes, R=10.0, H=0.1, c1=0.4375, c2=0.0625)

@@ -311,3 +311,69 @@ def test_switching_mirrors_the_second_half_of_an_identical_pair_only(pairs, monk
         assert a[column] == pytest.approx(b[column], rel=1e-10), column
     assert make_problem(build_scene("two_balloons", nodes=21, R2=10.2), "volume").exchange() is None
     assert make_problem(build_scene("two_balloons", nodes=21), "volume").exchange() is not None
+
+
+# ---------------------------------------------------------------------------------------------
+# the cost of two identical balloons: the symmetric states' evaluation by reduction, the fast options
+def test_identical_membranes_in_the_same_state_are_evaluated_once_with_the_same_numbers():
+    """Two identical balloons: the symmetric branch takes the second balloon's evaluation (energy,
+    residual, stiffness, volume and gradient, domain, measures, local checks) from the first's
+    (``reduced`` = True), the asymmetric half evaluates both (``reduced`` = False), and both
+    traces are the full computation's (``reuse_identical`` = False) to the last bit. An unequal
+    pair has no twins."""
+    def traced(reuse):
+        scene = build_scene("two_balloons", nodes=31)
+        scene.reuse_identical = reuse
+        branch = trace(scene, "volume", until={"stretch_max": 2.8})
+        (_, half), *_ = switch_at(scene, "volume", branch.critical_state(0),
+                                  options=ContinuationOptions(stop_at_first_limit=True, max_steps=200))
+        return scene, branch, half
+
+    scene, branch, half = traced(True)
+    full_scene, full_branch, full_half = traced(False)
+    assert scene.twin_of() == (None, 0) and full_scene.twin_of() == (None, None)
+    assert scene.reduced_evaluations > 100 and full_scene.reduced_evaluations == 0
+    assert branch.table["reduced"].all() and not half.table["reduced"].iloc[1:].any()
+    assert "reduced" not in full_branch.table
+    for reduced, full in ((branch, full_branch), (half, full_half)):
+        for table, reference in ((reduced.table, full.table), (reduced.points, full.points)):
+            assert list(table.columns.drop("reduced")) == list(reference.columns)
+            for column in reference.columns:
+                assert table[column].equals(reference[column]), column
+        assert reduced.stats == full.stats
+    unequal = build_scene("two_balloons", nodes=21, R2=10.2)
+    assert unequal.twin_of() == (None, None)
+
+
+def test_fast_options_locate_the_default_traces_points(pairs):
+    """The must-show run's options (studies/two_balloons.py FAST: 5 corrector iterations aimed at,
+    not 3) take half the points and find the same BPs, fold and stability: the located points
+    agree with the default trace's to 1e-11 relative at N = 101."""
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "studies" / "two_balloons.py"
+    spec = importlib.util.spec_from_file_location("two_balloons_study", path)
+    study = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(study)
+    branch, child = pairs[101]
+    fast, fast_child = study.timed_pair(101)
+    assert len(fast.table) + len(fast_child.table) < 0.6 * (len(branch.table) + len(child.table))
+    assert list(fast.points["kind"]) == list(branch.points["kind"]) == ["BP", "BP"]
+    # a pitchfork by the exchange symmetry: a = c = 0 to rounding at either BP location (the null
+    # vector and the known tangent are made exactly antisymmetric and symmetric there), not only
+    # where the eigenvalue iteration's rounding happens to be symmetric (c was 3e-6 here without)
+    for half in (child, fast_child):
+        switch = half.stats["switch"]
+        assert abs(switch["a"]) < 1e-14 * abs(switch["b"]) and abs(switch["c"]) < 1e-14 * abs(switch["b"]), switch
+    for column in ("control", "pressure", "stretch_1"):
+        assert np.allclose(fast.points[column], branch.points[column], rtol=1e-11, atol=0), column
+        assert fast_child.limit_points()[column].iloc[0] == pytest.approx(child.limit_points()[column].iloc[0],
+                                                                          rel=1e-11), column
+    end, fast_end = branch.table.iloc[-1], fast.table.iloc[-1]
+    assert fast_end["stretch_max"] == pytest.approx(2.8, rel=1e-12) and end["control"] == pytest.approx(
+        fast_end["control"], rel=1e-11)
+    # stability along the fast half against the exact pair, as along the default one
+    fold_s = float(fast_child.points["s"].iloc[0])
+    away = fast_child.table[np.abs(fast_child.table["s"] - fold_s) > 0.1]
+    assert len(away) > 5 and list(away["stable"]) == [pair_stable(a, b) for a, b in zip(away["stretch_1"],
+                                                                                      away["stretch_2"])]

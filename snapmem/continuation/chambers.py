@@ -229,6 +229,9 @@ class ChamberProblem(LoadProblem):
                "E_hat": sc.e_hat(loads.get("voltage_1", 0.0))}
         out.update({k: v for k, v in loads.items() if k.startswith("pressure_") or k.startswith("voltage_")})
         out.update(sc.measures(q, loads))
+        reduced = sc.reduced(q)
+        if reduced is not None:          # identical membranes: the state's evaluation was one membrane's
+            out["reduced"] = reduced
         for c, ch in enumerate(sc.chambers):
             if ch.is_gas:
                 amount = lam if c == self.controlled else self.fixed[c]

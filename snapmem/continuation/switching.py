@@ -52,7 +52,8 @@ def second_derivative(pb, x, lam, u, v, scale: float) -> np.ndarray:
     return (plus - minus) / (2 * eps)
 
 
-def bifurcation_direction(tracer: Tracer, c: Point, phi: np.ndarray, imperfect: bool = False):
+def bifurcation_direction(tracer: Tracer, c: Point, phi: np.ndarray, imperfect: bool = False,
+                          exchange: np.ndarray | None = None):
     """(the unit direction (x, lambda) of the branch bifurcating at c, the coefficients (a, b, c)
     of the algebraic bifurcation equation, whether c was taken as a fold of the mesh).
 
@@ -60,6 +61,11 @@ def bifurcation_direction(tracer: Tracer, c: Point, phi: np.ndarray, imperfect: 
     direction is then the null vector itself, oriented along c's tangent. Else the known branch's
     tangent is recomputed orthogonal to phi (at the BP the bordered tangent solve is singular):
     t = (w, 1) normalised, [K phi; phi^T 0] [w; mu] = [-dR/dlambda; 0].
+
+    ``exchange``: the exchange permutation of two identical membranes (:func:`_exchange_breaking`)
+    when c is a symmetric state and phi the antisymmetric mode that breaks it; w, which solves a
+    system commuting with the exchange with a symmetric right-hand side, is then made exactly
+    symmetric, so that a and c are zero to rounding by symmetry, whatever the rounding of the solves.
     """
     pb = tracer.pb
     n = c.tangent.size
@@ -73,6 +79,8 @@ def bifurcation_direction(tracer: Tracer, c: Point, phi: np.ndarray, imperfect: 
     if lu.singular:
         raise SolverError("switching: the BP's bordered stiffness is singular (not a simple BP)")
     w = lu.solve(np.append(-pb.dF_dlam(c.x, c.lam), 0.0))[:-1]
+    if exchange is not None:
+        w = 0.5 * (w + w[exchange])
     t = np.append(w, 1.0)
     t *= np.sign(c.tangent[-1]) or 1.0
     t /= math.sqrt(tracer.inner(t, t))
@@ -146,10 +154,13 @@ def switch_at(scene, control: str, c: Point, ds: float = 0.02, until=None,
     if c.tangent is None:
         raise SnapmemError("the BP has no tangent: cannot switch there")
     phi = _null_vector(pb, J, c)
+    exchange = _exchange_breaking(pb, c, phi)
+    if exchange is not None:
+        phi = 0.5 * (phi - phi[exchange])      # the exchange-breaking mode, antisymmetric exactly
     if imperfect is None:
         Fl = pb.dF_dlam(c.x, c.lam)[: phi.size]
         imperfect = abs(phi @ Fl) / (np.linalg.norm(phi) * np.linalg.norm(Fl)) > SYMMETRY_COUPLING
-    d, coefficients, fold = bifurcation_direction(tracer, c, phi, imperfect)
+    d, coefficients, fold = bifurcation_direction(tracer, c, phi, imperfect, exchange)
     perm = _mirror_permutation(pb, c, d)
     halves = []
     for sign in (1, -1):
@@ -177,6 +188,22 @@ def switch_at(scene, control: str, c: Point, ds: float = 0.02, until=None,
     return halves
 
 
+def _exchange_breaking(pb, c: Point, phi: np.ndarray):
+    """The exchange permutation of the problem's unknowns (its ``exchange``: two identical
+    membranes) if the BP ``c`` is a symmetric state (to 1e-8) and its null vector ``phi``
+    antisymmetric up to a symmetric part below 1e-6 of it (the mode breaks the exchange), else None.
+    By symmetry that null vector is antisymmetric exactly; the located one is, to the rounding of
+    the eigenvalue iteration, which the bifurcation coefficients would otherwise magnify."""
+    exchange = getattr(pb, "exchange", None)
+    perm = None if exchange is None else exchange()
+    if perm is None or c.x.size != perm.size or phi.size != perm.size:
+        return None
+    if np.max(np.abs(c.x[perm] - c.x)) > 1e-8 * max(np.max(np.abs(c.x)), 1e-300):
+        return None
+    anti, sym = np.linalg.norm(phi - phi[perm]), np.linalg.norm(phi + phi[perm])
+    return perm if sym <= 1e-6 * anti else None
+
+
 def _mirror_permutation(pb, c: Point, d: np.ndarray):
     """The exchange permutation of the problem's unknowns (its ``exchange``: two identical
     membranes) if the BP ``c`` is a symmetric state and the direction ``d`` antisymmetric (to
@@ -200,10 +227,11 @@ def mirror_branch(child: Branch, pb, perm: np.ndarray) -> Branch:
     Not computed: its tables carry ``mirrored`` = True, its ``stats['mirror_of']`` is the sign of
     the half it is the image of, and its Newton counts are zero."""
     def swapped(table):
-        out = table.copy()
+        names = {}
         for col in table.columns:
             if col.endswith("_1") and col[:-2] + "_2" in table.columns:
-                out[col], out[col[:-2] + "_2"] = table[col[:-2] + "_2"].values, table[col].values
+                names[col], names[col[:-2] + "_2"] = col[:-2] + "_2", col
+        out = table.rename(columns=names)[list(table.columns)]       # one relabelling, columns in place
         out["mirrored"] = True
         return out
 

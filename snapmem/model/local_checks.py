@@ -128,8 +128,11 @@ def local_state(scene, q: np.ndarray, loads=None, with_tension: bool = True) -> 
     (edges numbered within that membrane) with the smallest tension over all of them."""
     if hasattr(scene, "membranes"):
         loads = scene.resolve_loads(loads)
-        states = [local_state(m, qi, scene.membrane_loads(i, loads), with_tension)
-                  for i, (m, qi) in enumerate(zip(scene.membranes, scene.split(q)))]
+        parts, states = scene.split(q), []
+        for i, (m, qi) in enumerate(zip(scene.membranes, parts)):
+            twin = scene.same_as(i, parts, loads)          # an identical membrane in the same state
+            states.append(states[twin] if twin is not None
+                          else local_state(m, qi, scene.membrane_loads(i, loads), with_tension))
         states = [s for s in states if s is not None]
         if not states:
             return None

@@ -84,6 +84,7 @@ class MultiScene:
                 raise SnapmemError(f"membrane {i + 1} has rigid bodies: not supported in a multi-membrane scene")
         sizes = [m.reference_state().size for m in self.membranes]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        self._slices = [slice(int(a), int(b)) for a, b in zip(self.offsets[:-1], self.offsets[1:])]
         self.free = np.concatenate([m.free + o for m, o in zip(self.membranes, self.offsets)])
         self.free_offsets = np.concatenate([[0], np.cumsum([m.n_free for m in self.membranes])]).astype(int)
         self.bandwidth = max(m.bandwidth for m in self.membranes)
@@ -92,6 +93,12 @@ class MultiScene:
         self._swept = [compiled() and [type(t) for t in m.edge_terms + m.density_terms if "pressure" in t.loads]
                        == [PressureWork] for m in self.membranes]
         self._edge_dofs = [(2 * m.meridian.edges[:, 0], 2 * m.meridian.edges[:, 1]) for m in self.membranes]
+        self._twins = None                 # membrane i -> an earlier identical one (twin_of), found when first asked
+        #: False: evaluate every membrane, identical or not (to check the reduction against).
+        self.reuse_identical = True
+        #: Membrane evaluations (and volumes, domain checks, measures) taken from an identical
+        #: membrane in the same state instead of being computed (:meth:`same_as`).
+        self.reduced_evaluations = 0
         self.loads = {}
         for c, chamber in enumerate(self.chambers):
             self.loads[self.pressure_name(c)] = float(chamber.pressure)
@@ -162,7 +169,7 @@ class MultiScene:
 
     def split(self, q: np.ndarray) -> list:
         """The membranes' states (views of q)."""
-        return [q[a:b] for a, b in zip(self.offsets[:-1], self.offsets[1:])]
+        return [q[s] for s in self._slices]
 
     def supply_load_names(self) -> tuple:
         """The loads a time schedule may add to a scene's (:mod:`snapmem.dynamics.supplies`), per
@@ -201,11 +208,68 @@ class MultiScene:
         return own
 
     # ----------------------------------------------------------------------------------------
+    # identical membranes: a membrane in the same state as an identical one is not evaluated twice
+    def twin_of(self) -> tuple:
+        """For each membrane, an earlier membrane identical to it (its index), or None.
+
+        Identical: the same reference state, free and fixed degrees of freedom, chamber and side,
+        energy terms (types and reprs) and loads of its own, and bitwise the same energy, residual,
+        stiffness and measures at a deformed probe state. Such a membrane in the same state as its
+        twin (bitwise, under the same loads) has the same evaluation: the scene takes its twin's
+        (:meth:`same_as`), which is how the symmetric states of two identical balloons cost one
+        balloon's evaluation, with the same numbers to the last bit. Found at the first call and
+        kept: a membrane changed in place afterwards needs ``_twins = None`` again."""
+        if not self.reuse_identical:
+            return (None,) * len(self.membranes)
+        if self._twins is None:
+            self._twins = tuple(next((j for j in range(i) if self._identical(j, i)), None)
+                                for i in range(len(self.membranes)))
+        return self._twins
+
+    def _identical(self, j: int, i: int) -> bool:
+        a, b = self.membranes[j], self.membranes[i]
+        qa, qb = a.reference_state(), b.reference_state()
+        if (qa.shape != qb.shape or not np.array_equal(qa, qb) or not np.array_equal(a.free, b.free)
+                or tuple(a.fixed) != tuple(b.fixed) or self.chamber_of[j] != self.chamber_of[i]
+                or [repr(t) if type(t).__repr__ is not object.__repr__ else type(t) for t in a.terms]
+                != [repr(t) if type(t).__repr__ is not object.__repr__ else type(t) for t in b.terms]):
+            return False
+        loads = dict(self.loads)
+        own_a, own_b = self.membrane_loads(j, loads), self.membrane_loads(i, loads)
+        if own_a != own_b:
+            return False
+        probe = qa.copy()
+        wave = 1.0 + 0.05 * np.sin(np.arange(probe.size) * 0.7 + 0.3)
+        probe[a.free] *= wave[a.free]
+        own = {k: (v if k != "pressure" else 0.01 * a.mu * a.thickness / a.meridian.size) for k, v in own_a.items()}
+        ea, eb = a.evaluate(probe, own), b.evaluate(probe.copy(), own)
+        return (ea.energy == eb.energy and np.array_equal(ea.residual, eb.residual)
+                and np.array_equal(ea.stiffness.lower(), eb.stiffness.lower())
+                and a.measures(probe, own) == b.measures(probe.copy(), own))
+
+    def same_as(self, i: int, states: Sequence[np.ndarray], loads: Mapping[str, float] | None = None):
+        """The earlier membrane whose evaluation membrane i has in ``states`` (the membranes'
+        states, :meth:`split`) under ``loads`` (resolved; None: whatever does not depend on them,
+        volume and domain): its twin (:meth:`twin_of`) if both are in the same state bitwise and
+        carry the same loads of their own, else None."""
+        twin = self.twin_of()[i]
+        if twin is None or states[i].tobytes() != states[twin].tobytes():     # bitwise (0.0 and -0.0 differ)
+            return None
+        if loads is not None and self.membrane_loads(i, loads) != self.membrane_loads(twin, loads):
+            return None
+        return twin
+
+    # ----------------------------------------------------------------------------------------
     def evaluate(self, q: np.ndarray, loads: Mapping[str, float] | None = None, order: int = 2) -> Evaluation:
         """Total potential, gradient and block-diagonal band stiffness (one BandedMatrix) at q."""
         loads = self.resolve_loads(loads)
-        parts = [m.evaluate(qi, self.membrane_loads(i, loads), order)
-                 for i, (m, qi) in enumerate(zip(self.membranes, self.split(q)))]
+        states = self.split(q)
+        parts = []
+        for i, (m, qi) in enumerate(zip(self.membranes, states)):
+            twin = self.same_as(i, states, loads)
+            if twin is not None:
+                self.reduced_evaluations += 1
+            parts.append(parts[twin] if twin is not None else m.evaluate(qi, self.membrane_loads(i, loads), order))
         energy = sum(p.energy for p in parts)
         if order < 1:
             return Evaluation(energy, None, None, None)
@@ -253,19 +317,38 @@ class MultiScene:
         parts = self.split(q)
         total = chamber.dead_volume
         out = np.zeros(self.n_free) if gradient else None
+        own = {}                                  # membrane -> its signed volume (for its twins)
         for i, s in zip(chamber.membranes, chamber.signs):
             m, qi = self.membranes[i], parts[i]
             block = slice(self.free_offsets[i], self.free_offsets[i + 1])
+            twin = self.same_as(i, parts)
+            if twin in own:                       # an identical membrane in the same state (same sign)
+                total += own[twin]
+                if gradient:
+                    out[block] = out[self.free_offsets[twin]: self.free_offsets[twin + 1]]
+                continue
             if self._swept[i]:
                 a, b = self._edge_dofs[i]
-                total += s * float(swept_volume.py_func(qi[a], qi[b], qi[b + 1] - qi[a + 1], 1.0)[0].sum())
+                own[i] = s * float(swept_volume.py_func(qi[a], qi[b], qi[b + 1] - qi[a + 1], 1.0)[0].sum())
+                total += own[i]
                 if gradient:
                     out[block] = s * volume_gradient(qi, m.meridian.edges, qi.size)[m.free]
             else:
-                total += s * m.volume(qi)
+                own[i] = s * m.volume(qi)
+                total += own[i]
                 if gradient:
                     out[block] = -s * m.load_derivative(qi, "pressure", {"pressure": 0.0})
         return total, out
+
+    def reduced(self, q: np.ndarray) -> bool | None:
+        """Whether state q was evaluated by reduction (every membrane with an identical twin in
+        the same state took its twin's evaluation, :meth:`same_as`); None for a scene without
+        identical membranes."""
+        twins = self.twin_of()
+        if all(t is None for t in twins):
+            return None
+        states = self.split(q)
+        return all(self.same_as(i, states) is not None for i, t in enumerate(twins) if t is not None)
 
     def volume(self, q: np.ndarray) -> float:
         """The first chamber's volume [m^3] (or the first membrane's, without chambers)."""
@@ -273,7 +356,10 @@ class MultiScene:
 
     # ----------------------------------------------------------------------------------------
     def inadmissible(self, q: np.ndarray):
-        for i, (m, qi) in enumerate(zip(self.membranes, self.split(q))):
+        states = self.split(q)
+        for i, (m, qi) in enumerate(zip(self.membranes, states)):
+            if self.same_as(i, states) is not None:
+                continue                           # its twin in the same state was admissible
             why = m.inadmissible(qi)
             if why is not None:
                 return f"membrane {i + 1}: {why}"
@@ -289,8 +375,11 @@ class MultiScene:
         """volume (first chamber's total), u_max, stretch_max, min_tension, taut over all membranes,
         and each membrane's measures with its number as a suffix (``volume_1``, ``stretch_2``)."""
         loads = self.resolve_loads(loads)
-        own = [m.measures(qi, self.membrane_loads(i, loads))
-               for i, (m, qi) in enumerate(zip(self.membranes, self.split(q)))]
+        states = self.split(q)
+        own = []
+        for i, (m, qi) in enumerate(zip(self.membranes, states)):
+            twin = self.same_as(i, states, loads)
+            own.append(dict(own[twin]) if twin is not None else m.measures(qi, self.membrane_loads(i, loads)))
         out = {"volume": self.volume(q), "u_max": max(o["u_max"] for o in own),
                "stretch_max": max(o["stretch_max"] for o in own),
                "min_tension": min(o["min_tension"] for o in own), "taut": all(o["taut"] for o in own)}
