@@ -146,6 +146,7 @@ def test_cli_trace_sensitivity(tmp_path):
     assert main(["trace", "balloon", "--set", "nodes=41", "--sensitivity", "nodes"]) == 2
 
 
+@pytest.mark.slow
 def test_balloon_atlas_study_quick(tmp_path):
     """studies/balloon_atlas.py --quick: every curve lies on the exact sphere's (LP curves to
     2e-3, BP curves to 6e-5 in pressure at N = 31: the P2 curve is that of the unfolded BP, the

@@ -56,6 +56,7 @@ def test_prestretched_balloon_compiled_is_the_general_path():
     assert np.max(np.abs(general["q"][-1] - general["q"][0])) > 0.1          # it moved
 
 
+@pytest.mark.slow
 def test_viscous_prestretched_robot_compiled_is_the_general_path():
     """The ball thrown by a prestretched viscoelastic balloon (bodies, contact, a ramp): its first 0.2 s."""
     ex = experiment("ball_throw", viscous_mu=1e5, relaxation_time=0.05, prestretch=1.2)

@@ -108,6 +108,7 @@ def test_torus_limit_point_is_a_pressure_maximum_and_snapmem_converges_to_it():
     assert np.all(err > 0)
 
 
+@pytest.mark.slow
 def test_pump_limit_points_at_300_volts_match_snapmem():
     """The Gent pump plate at 300 V: the ODE's pressure maximum, snapmem's fold converging to it."""
     E = e_hat(300.0, 1e-4, 1e-10, 45e3)

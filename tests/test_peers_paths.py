@@ -80,6 +80,7 @@ def test_coordinate_path_rejects_a_fixed_coordinate():
         coordinate_path(scene, 1, [0.1], (scene.reference_state(), {"pressure": 0.0}))
 
 
+@pytest.mark.slow
 def test_peers_richardson_torus_curve_meets_the_ode():
     """studies/peers.py's path curve on 24 and 48 nodes against the ODE at tight tolerance."""
     peers = study("peers")

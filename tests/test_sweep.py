@@ -232,6 +232,7 @@ def test_readme_sweep_python(tmp_path):
     assert table["stretch"].between(1.0, 1.6).all()
 
 
+@pytest.mark.slow
 def test_soak_study_runs_on_a_few_designs(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     run = subprocess.run([sys.executable, str(ROOT / "studies" / "soak.py"), "--count", "12", "--workers", "2",
