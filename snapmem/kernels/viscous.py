@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
+from snapmem.kernels.assembly import edge_stretches
+
 #: The local Newton ends when every |d zeta| is below this (log strain) ...
 LOCAL_TOL = 1e-14
 #: ... or fails after this many iterations.
@@ -149,3 +151,38 @@ def stored_energy(lam1, lam2, zeta, moduli, jlims, weight):
             total += weight[e] * network_log_derivatives(eps1 - zeta[k, 0, e], eps2 - zeta[k, 1, e], moduli[k],
                                                          jlims[k])[0]
     return total
+
+
+@njit(cache=True, nogil=True)
+def stored_energy_frames(Q, edges, inv_length, inv_mid_radius, zetas, moduli, jlims, weight):
+    """:func:`stored_energy` of every frame (T,) [J]: the states Q (T, n) (their stretches by
+    snapmem.kernels.assembly.edge_stretches) with the frames' internal log stretches ``zetas``
+    (T, K, 2, E), in one call."""
+    energy = np.empty(Q.shape[0])
+    for t in range(Q.shape[0]):
+        lam1, lam2 = edge_stretches(Q[t], edges, inv_length, inv_mid_radius)
+        energy[t] = stored_energy(lam1, lam2, zetas[t], moduli, jlims, weight)
+    return energy
+
+
+@njit(cache=True, nogil=True)
+def anchor_internal(zeta, previous, c_now, c_previous, out):
+    """A time step's anchor of the internal log stretches, zeta_hat = c_now zeta_n + c_previous
+    zeta_{n-1} (every array (K, 2, E); the scheme's coefficients), written into ``out``."""
+    for k in range(zeta.shape[0]):
+        for i in range(2):
+            for e in range(zeta.shape[2]):
+                out[k, i, e] = c_now * zeta[k, i, e] + c_previous * previous[k, i, e]
+
+
+@njit(cache=True, nogil=True)
+def update_internal(star, zeta, previous, n_star, n_now, n_previous, zeta_hat, h, dt, viscosities, weight, out):
+    """A solved step's new internal log stretches, zeta_{n+1} = n_star zeta* + n_now zeta_n +
+    n_previous zeta_{n-1} (the scheme's coefficients; every array (K, 2, E)), written into
+    ``out``; returns the energy the dashpots dissipated over the step [J] (:func:`step_dissipation`
+    of zeta* from the anchor ``zeta_hat`` with the step h [s], over dt [s])."""
+    for k in range(zeta.shape[0]):
+        for i in range(2):
+            for e in range(zeta.shape[2]):
+                out[k, i, e] = n_star * star[k, i, e] + n_now * zeta[k, i, e] + n_previous * previous[k, i, e]
+    return step_dissipation(star, zeta_hat, h, dt, viscosities, weight)
