@@ -17,8 +17,11 @@ from snapmem._lazy import njit
 
 from snapmem.kernels.assembly import edge_stretches
 
-#: The local Newton ends when every |d zeta| is below this (log strain) ...
+#: The local Newton's accuracy in the internal log stretches: it ends after a correction below
+#: LOCAL_STEP = sqrt(LOCAL_TOL), since it converges quadratically (the remaining error is about the
+#: correction squared: another iteration would move zeta by rounding only) ...
 LOCAL_TOL = 1e-14
+LOCAL_STEP = 1e-7
 #: ... or fails after this many iterations.
 LOCAL_MAX_ITERATIONS = 50
 
@@ -64,7 +67,7 @@ def flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
 def network_internal(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
     """The implicit flow rule of one network on every edge: Newton (:func:`flow_newton_step`) on the
     step's incremental potential in zeta from (zeta1, zeta2), until every correction is below
-    :data:`LOCAL_TOL` (convex: its Hessian f_ee + c A is positive definite).
+    :data:`LOCAL_STEP` (then within about :data:`LOCAL_TOL` of the solution; convex: its Hessian f_ee + c A is positive definite).
 
     eps1, eps2, zeta1, zeta2, zhat1, zhat2 : (E,) the log stretches, the start, the anchor; mu,
     jlim the network's modulus [Pa] and lock; c = eta / h [Pa]. Returns (zeta1, zeta2, converged).
@@ -74,7 +77,7 @@ def network_internal(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
         step1, step2 = flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c)
         z1 = z1 - step1
         z2 = z2 - step2
-        if max(np.max(np.abs(step1)), np.max(np.abs(step2))) < LOCAL_TOL:
+        if max(np.max(np.abs(step1)), np.max(np.abs(step2))) < LOCAL_STEP:
             return z1, z2, True
     return z1, z2, False
 
@@ -87,7 +90,7 @@ def edge_internal(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
         step1, step2 = flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c)
         z1 -= step1
         z2 -= step2
-        if max(abs(step1), abs(step2)) < LOCAL_TOL:
+        if max(abs(step1), abs(step2)) < LOCAL_STEP:
             return z1, z2, True
     return z1, z2, False
 
