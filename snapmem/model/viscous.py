@@ -143,8 +143,9 @@ class ViscousNetworks(DensityTerm):
         self._solved = (y, zeta)
 
     def commit(self, zeta: np.ndarray) -> None:
-        """Take ``zeta`` (K, 2, E) as the new state (after an accepted step)."""
-        self.zeta = np.asarray(zeta, dtype=float)        # kept, not copied: the stepper writes it no more
+        """Take ``zeta`` (K, 2, E) as the new state (after an accepted step). The array is kept, not
+        copied: the stepper writes it again only once it is neither the state nor the history."""
+        self.zeta = np.asarray(zeta, dtype=float)
 
     # ------------------------------------------------------------------------------------------
     # the local problem
