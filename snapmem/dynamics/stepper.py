@@ -132,8 +132,11 @@ class _InternalState:
         self._news = [np.empty_like(term.zeta) for term in self.terms]
         self._coefficients = None          # (h, c_now, c_previous, n_star, n_now, n_previous) of the open step
         self._pending = None               # the pending step's dissipation [J] of every term
+        # the kernels of the run (compiled, or their Python on the reference path)
+        self._anchor, self._update = self._kernel("anchor_internal"), self._kernel("update_internal")
 
-    def _kernel(self, name: str):
+    @staticmethod
+    def _kernel(name: str):
         kernel = getattr(_viscous_kernels, name)
         return kernel if compiled() else kernel.py_func
 
@@ -144,10 +147,9 @@ class _InternalState:
         past_dt = None if history is None or self.previous is None else history[2]
         self._coefficients = coefficients = scheme_coefficients(scheme, t, dt, past_dt)
         h, c_now, c_previous = coefficients[:3]
-        anchor = self._kernel("anchor_internal")
         for i, (term, hat) in enumerate(zip(self.terms, self._hats)):
             previous = term.zeta if self.previous is None else self.previous[i]
-            anchor(term.zeta, previous, c_now, c_previous, hat)
+            self._anchor(term.zeta, previous, c_now, c_previous, hat)
             term.begin_step(h, hat)
 
     def close(self, y: np.ndarray | None, dt: float) -> None:
@@ -157,7 +159,7 @@ class _InternalState:
         pending = None
         if y is not None:
             h, _, _, n_star, n_now, n_previous = self._coefficients
-            update, weight, pending = self._kernel("update_internal"), self.scene.weight, []
+            update, weight, pending = self._update, self.scene.weight, []
             for i, (term, hat, new) in enumerate(zip(self.terms, self._hats, self._news)):
                 star = term.internal_at(y, self.scene)        # the compiled solve's own, if it took the step
                 previous = term.zeta if self.previous is None else self.previous[i]
