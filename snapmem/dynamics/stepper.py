@@ -14,6 +14,7 @@ choose its anchor (q_n, v_n), step h and load time t*.
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -21,6 +22,8 @@ from snapmem.dynamics.compiled_step import CompiledStep
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.trajectory import Trajectory
 from snapmem.errors import SnapmemError
+from snapmem.kernels import viscous as _viscous_kernels
+from snapmem.kernels.switch import compiled
 from snapmem.model.contact import contact_report, contact_terms
 from snapmem.model.local_checks import failure_margins_many
 from snapmem.model.scene import Evaluation, Scene
@@ -75,6 +78,26 @@ class _Stepper:
         return y, report
 
 
+def scheme_coefficients(scheme, t: float, dt: float, past_dt: float | None) -> tuple:
+    """The linear maps of a scheme's step on a state at rest (the viscous networks' internal
+    stretches have no velocity), read off the scheme with unit states.
+
+    Returns (h, c_now, c_previous, n_star, n_now, n_previous): the step of the incremental
+    potential [s], the anchor x_hat = c_now x_n + c_previous x_{n-1} and the new state
+    x_{n+1} = n_star y + n_now x_n + n_previous x_{n-1} from the solve's y; ``past_dt`` the last
+    step [s] (None: no history, the c_previous and n_previous are 0).
+    """
+    past = None if past_dt is None else (0.0, 0.0, past_dt)
+    now = scheme.anchor(1.0, 0.0, t, dt, past)
+    rest = scheme.anchor(0.0, 0.0, t, dt, past)
+    c_previous = n_previous = 0.0
+    if past is not None:
+        before = scheme.anchor(0.0, 0.0, t, dt, (1.0, 0.0, past_dt))
+        c_previous, n_previous = float(before.q), float(before.new_state(0.0)[0])
+    return (float(now.h), float(now.q), c_previous, float(rest.new_state(1.0)[0]), float(now.new_state(0.0)[0]),
+            n_previous)
+
+
 class _InternalState:
     """The internal stretches of the scene's viscous networks (:mod:`snapmem.model.viscous`) across steps.
 
@@ -83,6 +106,13 @@ class _InternalState:
     and the scheme's ``new_state`` turns the solve's zeta*(y) into zeta_{n+1} (the midpoint rule:
     2 zeta* - zeta_n). The networks start relaxed at the initial state q0 (xi = lam there: the
     reference state gives xi = 1). Without viscous terms every method does nothing.
+
+    Every scheme is linear in the states, so a step's anchor is c_now zeta_n + c_previous
+    zeta_{n-1} and its new state n_star zeta* + n_now zeta_n + n_previous zeta_{n-1}:
+    :func:`scheme_coefficients` reads those numbers off the scheme itself (its formulas stay in
+    snapmem.dynamics.schemes), and one compiled call per step and term applies them
+    (snapmem.kernels.viscous ``anchor_internal``, ``update_internal``, which adds the step's
+    dissipation) into arrays kept for the run: no per-step arrays, no per-step Python on them.
     """
 
     def __init__(self, scene: Scene, q0: np.ndarray):
@@ -97,43 +127,59 @@ class _InternalState:
             term.limit = "instantaneous"
         self.previous = None               # zeta_{n-1} of every term (the scheme's history)
         self.dissipated = 0.0              # [J] since the start
-        self._anchors = self._pending = None
+        # the run's arrays of every term: the open step's anchor, the pending new state, a spare
+        self._hats = [np.empty_like(term.zeta) for term in self.terms]
+        self._news = [np.empty_like(term.zeta) for term in self.terms]
+        self._coefficients = None          # (h, c_now, c_previous, n_star, n_now, n_previous) of the open step
+        self._pending = None               # the pending step's dissipation [J] of every term
+        # the kernels of the run (compiled, or their Python on the reference path)
+        self._anchor, self._update = self._kernel("anchor_internal"), self._kernel("update_internal")
+
+    @staticmethod
+    def _kernel(name: str):
+        kernel = getattr(_viscous_kernels, name)
+        return kernel if compiled() else kernel.py_func
 
     def open(self, scheme, t: float, dt: float, history) -> None:
         """Before a solve: the anchor of every term's incremental potential for ``scheme``'s step."""
         if not self.terms:
             return
-        self._anchors = []
-        for i, term in enumerate(self.terms):
-            z = term.zeta.ravel()
-            past = None if history is None or self.previous is None else (
-                self.previous[i].ravel(), np.zeros_like(z), history[2])
-            anchor = scheme.anchor(z, np.zeros_like(z), t, dt, past)
-            term.begin_step(anchor.h, anchor.q.reshape(term.zeta.shape))
-            self._anchors.append(anchor)
+        past_dt = None if history is None or self.previous is None else history[2]
+        self._coefficients = coefficients = scheme_coefficients(scheme, t, dt, past_dt)
+        h, c_now, c_previous = coefficients[:3]
+        for i, (term, hat) in enumerate(zip(self.terms, self._hats)):
+            previous = term.zeta if self.previous is None else self.previous[i]
+            self._anchor(term.zeta, previous, c_now, c_previous, hat)
+            term.begin_step(h, hat)
 
     def close(self, y: np.ndarray | None, dt: float) -> None:
         """After a solve: the step's new internal state at y (None: the solve failed), kept pending."""
         if not self.terms:
             return
-        pending = []
+        pending = None
         if y is not None:
-            for term, anchor in zip(self.terms, self._anchors):
+            h, _, _, n_star, n_now, n_previous = self._coefficients
+            update, weight, pending = self._update, self.scene.weight, []
+            for i, (term, hat, new) in enumerate(zip(self.terms, self._hats, self._news)):
                 star = term.internal_at(y, self.scene)        # the compiled solve's own, if it took the step
-                new = anchor.new_state(star.ravel())[0].reshape(star.shape)
-                pending.append((new, term.step_dissipation(star, dt, self.scene.weight)))
+                previous = term.zeta if self.previous is None else self.previous[i]
+                pending.append(float(update(star, term.zeta, previous, n_star, n_now, n_previous, hat, h, dt,
+                                            term.viscosities, weight, new)))
         for term in self.terms:
             term.end_step()
-        self._pending = pending or None
+        self._pending = pending
 
     def commit(self) -> None:
-        """The step was accepted: its pending internal state becomes the state."""
+        """The step was accepted: its pending internal state becomes the state (the arrays rotate:
+        the state becomes the history, the history's array takes the next step's new state)."""
         if not self.terms or self._pending is None:
             return
+        spares = self._news if self.previous is None else self.previous
         self.previous = [term.zeta for term in self.terms]
-        for term, (new, dissipated) in zip(self.terms, self._pending):
+        for term, new, dissipated in zip(self.terms, self._news, self._pending):
             term.commit(new)
             self.dissipated += dissipated
+        self._news = [np.empty_like(new) if spare is new else spare for spare, new in zip(spares, self._news)]
         self._pending = None
 
     def finish(self) -> None:
@@ -167,19 +213,56 @@ class _InternalState:
         self.previous = None if previous is None else [np.array(z, dtype=float) for z in previous]
         self.dissipated = float(saved.get("dissipated", 0.0))
 
-    def set_frame(self, xi: np.ndarray) -> None:
-        """Put a frame's internal stretches ``xi`` (K, 2, E) back into the terms (to measure it)."""
+    def set_frame(self, zeta: np.ndarray) -> None:
+        """Put a frame's internal log stretches ``zeta`` (K, 2, E) back into the terms (to measure it)."""
         start = 0
         for term in self.terms:
-            term.zeta = np.log(xi[start: start + term.networks])
+            term.zeta = zeta[start: start + term.networks]
             start += term.networks
 
-    def frame(self) -> dict:
-        """What a frame records: ``xi`` (K, 2, E) the internal stretches of every network (all terms'
-        networks stacked), ``dissipation`` [J] dissipated by the dashpots since the start."""
-        if not self.terms:
-            return {}
-        return {"xi": np.exp(np.concatenate([term.zeta for term in self.terms])), "dissipation": self.dissipated}
+    def stored_energies(self, Q: np.ndarray, zetas: np.ndarray) -> np.ndarray:
+        """The networks' stored energy [J] of every frame (T,): states Q (T, n), the frames' internal
+        log stretches ``zetas`` (T, K, 2, E) (all terms' networks stacked), in one call per term."""
+        m, kernel = self.scene.meridian, self._kernel("stored_energy_frames")
+        Q = np.ascontiguousarray(Q, dtype=float)
+        energy, start = np.zeros(len(Q)), 0
+        for term in self.terms:
+            part = np.ascontiguousarray(zetas[:, start: start + term.networks])
+            energy = energy + kernel(Q, m.edges, m.inverse_length, m.inverse_mid_radius, part, term.moduli,
+                                     term.jlims, self.scene.weight)
+            start += term.networks
+        return energy
+
+    def frame(self):
+        """What a frame records, read when the recorder keeps a frame (not every step): ``zeta``
+        (K, 2, E) the internal log stretches of every network (all terms' networks stacked; the
+        trajectory has ``xi`` = exp(zeta)), ``dissipation`` [J] dissipated by the dashpots since the
+        start. An empty mapping without networks."""
+        return _NetworksFrame(self) if self.terms else {}
+
+
+class _NetworksFrame(Mapping):
+    """The networks' part of a frame (:meth:`_InternalState.frame`), read from the state when the
+    recorder keeps the frame: the driver asks for one every step, the recorder reads few."""
+
+    __slots__ = ("_state",)
+    KEYS = ("zeta", "dissipation")
+
+    def __init__(self, state: _InternalState):
+        self._state = state
+
+    def __iter__(self):
+        return iter(self.KEYS)
+
+    def __len__(self) -> int:
+        return len(self.KEYS)
+
+    def __getitem__(self, key):
+        if key == "zeta":
+            return np.concatenate([term.zeta for term in self._state.terms])     # a copy: the arrays rotate
+        if key == "dissipation":
+            return self._state.dissipated
+        raise KeyError(key)
 
 
 class _Recorder:
@@ -223,18 +306,21 @@ class _Recorder:
 
     def _measures(self, Q, loads):
         """Potential energy, volume, smallest gap (T,) and contact report columns of the frames Q."""
+        viscous = self.internal is not None and bool(self.internal.terms)
         if self.compiled is not None:
-            viscous = self.internal is not None and self.internal.terms
-            return self.compiled.measures_many(Q, loads, [row["xi"] for row in self.rows] if viscous else None)
+            energy, volume, gap, columns = self.compiled.measures_many(Q, loads)
+            if viscous:                                              # the networks' stored energy of each frame
+                energy = energy + self.internal.stored_energies(Q, np.array([row["zeta"] for row in self.rows]))
+            return energy, volume, gap, columns
         scene = self.scene
         reports = [contact_report(scene, q) for q in Q]
         columns = {k: np.array([r[k] for r in reports]) for k in (reports[0] if reports else {})}
-        if self.internal is not None and self.internal.terms:       # each frame's networks' stored energy
+        if viscous:       # each frame's networks' stored energy
             energies = []
             for q, each, row in zip(Q, loads, self.rows):
-                self.internal.set_frame(row["xi"])
+                self.internal.set_frame(row["zeta"])
                 energies.append(scene.energy(q, each))
-            self.internal.set_frame(self.rows[-1]["xi"])
+            self.internal.set_frame(self.rows[-1]["zeta"])
             return (np.array(energies), np.array([scene.volume(q) for q in Q]), np.array([self._gap(q) for q in Q]),
                     columns)
         return (np.array([scene.energy(q, each) for q, each in zip(Q, loads)]),
@@ -245,6 +331,8 @@ class _Recorder:
         loads = [row["loads"] for row in self.rows]
         data = {k: np.array([row[k] for row in self.rows]) for k in self.rows[0] if k != "loads"}
         potential, volume, gap, contacts = self._measures(data["q"], loads)
+        if "zeta" in data:                                  # the networks' internal stretches
+            data["xi"] = np.exp(data.pop("zeta"))
         data.update(volume=volume, potential=potential, total=data["kinetic"] + potential,
                     min_gap=np.minimum(data["min_gap"], gap))
         for name in loads[0]:

@@ -15,8 +15,13 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-#: The local Newton ends when every |d zeta| is below this (log strain) ...
+from snapmem.kernels.assembly import edge_stretches
+
+#: The local Newton's accuracy in the internal log stretches: it ends after a correction below
+#: LOCAL_STEP = sqrt(LOCAL_TOL), since it converges quadratically (the remaining error is about the
+#: correction squared: another iteration would move zeta by rounding only) ...
 LOCAL_TOL = 1e-14
+LOCAL_STEP = 1e-7
 #: ... or fails after this many iterations.
 LOCAL_MAX_ITERATIONS = 50
 
@@ -62,7 +67,7 @@ def flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
 def network_internal(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
     """The implicit flow rule of one network on every edge: Newton (:func:`flow_newton_step`) on the
     step's incremental potential in zeta from (zeta1, zeta2), until every correction is below
-    :data:`LOCAL_TOL` (convex: its Hessian f_ee + c A is positive definite).
+    :data:`LOCAL_STEP` (then within about :data:`LOCAL_TOL` of the solution; convex: its Hessian f_ee + c A is positive definite).
 
     eps1, eps2, zeta1, zeta2, zhat1, zhat2 : (E,) the log stretches, the start, the anchor; mu,
     jlim the network's modulus [Pa] and lock; c = eta / h [Pa]. Returns (zeta1, zeta2, converged).
@@ -72,7 +77,7 @@ def network_internal(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
         step1, step2 = flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c)
         z1 = z1 - step1
         z2 = z2 - step2
-        if max(np.max(np.abs(step1)), np.max(np.abs(step2))) < LOCAL_TOL:
+        if max(np.max(np.abs(step1)), np.max(np.abs(step2))) < LOCAL_STEP:
             return z1, z2, True
     return z1, z2, False
 
@@ -85,7 +90,7 @@ def edge_internal(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
         step1, step2 = flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c)
         z1 -= step1
         z2 -= step2
-        if max(abs(step1), abs(step2)) < LOCAL_TOL:
+        if max(abs(step1), abs(step2)) < LOCAL_STEP:
             return z1, z2, True
     return z1, z2, False
 
@@ -149,3 +154,38 @@ def stored_energy(lam1, lam2, zeta, moduli, jlims, weight):
             total += weight[e] * network_log_derivatives(eps1 - zeta[k, 0, e], eps2 - zeta[k, 1, e], moduli[k],
                                                          jlims[k])[0]
     return total
+
+
+@njit(cache=True, nogil=True)
+def stored_energy_frames(Q, edges, inv_length, inv_mid_radius, zetas, moduli, jlims, weight):
+    """:func:`stored_energy` of every frame (T,) [J]: the states Q (T, n) (their stretches by
+    snapmem.kernels.assembly.edge_stretches) with the frames' internal log stretches ``zetas``
+    (T, K, 2, E), in one call."""
+    energy = np.empty(Q.shape[0])
+    for t in range(Q.shape[0]):
+        lam1, lam2 = edge_stretches(Q[t], edges, inv_length, inv_mid_radius)
+        energy[t] = stored_energy(lam1, lam2, zetas[t], moduli, jlims, weight)
+    return energy
+
+
+@njit(cache=True, nogil=True)
+def anchor_internal(zeta, previous, c_now, c_previous, out):
+    """A time step's anchor of the internal log stretches, zeta_hat = c_now zeta_n + c_previous
+    zeta_{n-1} (every array (K, 2, E); the scheme's coefficients), written into ``out``."""
+    for k in range(zeta.shape[0]):
+        for i in range(2):
+            for e in range(zeta.shape[2]):
+                out[k, i, e] = c_now * zeta[k, i, e] + c_previous * previous[k, i, e]
+
+
+@njit(cache=True, nogil=True)
+def update_internal(star, zeta, previous, n_star, n_now, n_previous, zeta_hat, h, dt, viscosities, weight, out):
+    """A solved step's new internal log stretches, zeta_{n+1} = n_star zeta* + n_now zeta_n +
+    n_previous zeta_{n-1} (the scheme's coefficients; every array (K, 2, E)), written into
+    ``out``; returns the energy the dashpots dissipated over the step [J] (:func:`step_dissipation`
+    of zeta* from the anchor ``zeta_hat`` with the step h [s], over dt [s])."""
+    for k in range(zeta.shape[0]):
+        for i in range(2):
+            for e in range(zeta.shape[2]):
+                out[k, i, e] = n_star * star[k, i, e] + n_now * zeta[k, i, e] + n_previous * previous[k, i, e]
+    return step_dissipation(star, zeta_hat, h, dt, viscosities, weight)

@@ -143,8 +143,9 @@ class ViscousNetworks(DensityTerm):
         self._solved = (y, zeta)
 
     def commit(self, zeta: np.ndarray) -> None:
-        """Take ``zeta`` (K, 2, E) as the new state (after an accepted step)."""
-        self.zeta = np.asarray(zeta, dtype=float)        # the stepper hands a fresh array
+        """Take ``zeta`` (K, 2, E) as the new state (after an accepted step). The array is kept, not
+        copied: the stepper writes it again only once it is neither the state nor the history."""
+        self.zeta = np.asarray(zeta, dtype=float)
 
     # ------------------------------------------------------------------------------------------
     # the local problem
@@ -176,14 +177,6 @@ class ViscousNetworks(DensityTerm):
         if self._solved is not None and self._solved[0] is y:
             return self._solved[1]
         return self.internal(scene.kinematics(y))
-
-    def step_dissipation(self, zeta_new_mid: np.ndarray, dt: float, weight: np.ndarray) -> float:
-        """Energy dissipated by the dashpots over a step of length dt [s] [J]: dt eta_k r^T A r summed
-        over networks and edges (weighted by the edges' reference volumes ``weight`` (E,) [m^3]),
-        with r = (zeta* - zeta_hat) / h the step's flow rate (snapmem.kernels.viscous)."""
-        h, zeta_hat = self._step
-        kernel = _kernel.step_dissipation if compiled() else _kernel.step_dissipation.py_func
-        return float(kernel(zeta_new_mid, zeta_hat, h, dt, self.viscosities, weight))
 
     def stored_energy(self, kin: EdgeKinematics, zeta: np.ndarray, weight: np.ndarray) -> float:
         """The networks' elastic energy [J] at the stretches ``kin`` with the internal log stretches
