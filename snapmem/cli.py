@@ -7,7 +7,9 @@ is one line on stderr and exit code 2; ``--debug`` shows the traceback instead.
 from __future__ import annotations
 
 import argparse
+import atexit
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -359,5 +361,22 @@ def main(argv=None) -> int:
         return 0
 
 
+def run() -> None:
+    """The ``snapmem`` command: :func:`main`, then a quick exit.
+
+    Freeing a process's modules at exit (numba's compiled code and LLVM among them) takes about
+    0.2 s of a 0.9 s ``snapmem simulate torus_snap``. Every output is written and closed by the
+    time :func:`main` returns, so the process ends at once instead, after flushing its streams and
+    running its exit handlers (logging, process pools, the first-use background compile)."""
+    code = main()
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):          # closed, or a pipe its reader closed
+            pass
+    os._exit(int(code or 0))
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

@@ -59,11 +59,24 @@ sys.stderr.write("\\n@inprocess %.6f\\n" % (time.perf_counter() - _start))
 """
 
 
+#: A CLI command as the installed ``snapmem`` script runs it: the tree's ``snapmem.cli.run`` (main,
+#: then a quick exit) where it has one, else ``sys.exit(main())``; the in-process time is written
+#: by the last exit handler.
+COMMAND = """import sys, time, atexit
+_start = time.perf_counter()
+atexit.register(lambda: sys.stderr.write("\\n@inprocess %.6f\\n" % (time.perf_counter() - _start)))
+import snapmem.cli as cli
+sys.argv = ["snapmem", *{args!r}]
+if hasattr(cli, "run"):
+    cli.run()
+sys.exit(cli.main())
+"""
+
+
 def _code(what) -> str:
     if isinstance(what, str):
         return WRAPPER.format(body=what)
-    body = f"from snapmem.cli import main\nstatus = main({what!r})\nassert not status, status"
-    return WRAPPER.format(body=body)
+    return COMMAND.format(args=list(what))
 
 
 def run_once(tree: Path, what, cold: bool, workdir: Path) -> tuple[float, float, float]:

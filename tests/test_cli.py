@@ -104,3 +104,26 @@ def test_hysteresis_exit_code_follows_whether_the_loop_closed(monkeypatch, capsy
                             module.Hysteresis(pd.DataFrame(), snaps, "loop closed", closed=closed))
         assert main(["hysteresis", "balloon", "--set", "nodes=11"]) == code
     assert capsys.readouterr().out.count("status: loop closed") == 2
+
+
+def test_the_command_exits_at_once_with_its_code_after_its_exit_handlers(tmp_path):
+    """``snapmem`` (snapmem.cli.run) skips the interpreter's teardown: the exit code, the streams,
+    the files written and the exit handlers must all be as a normal exit leaves them."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    script = ("import atexit, sys\natexit.register(lambda: print('handler ran'))\n"
+              "sys.argv = ['snapmem'] + sys.argv[1:]\nfrom snapmem.cli import run\nrun()\n")
+
+    def snapmem(*args):
+        return subprocess.run([sys.executable, "-c", script, *args], capture_output=True, text=True, cwd=tmp_path,
+                              env={**__import__("os").environ, "PYTHONPATH": str(root)}, timeout=300)
+
+    done = snapmem("trace", "balloon", "--set", "nodes=21", "--until", "stretch_max=2", "--out", "b.csv")
+    assert done.returncode == 0 and done.stdout.rstrip().endswith("handler ran"), done.stderr
+    import pandas as pd
+    table = pd.read_csv(tmp_path / "b.csv")
+    assert table["stretch_max"].iloc[-1] == pytest.approx(2.0, rel=1e-9) and (tmp_path / "b.npz").exists()
+    bad = snapmem("trace", "balloon", "--set", "nodes=-3")
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "handler ran" in bad.stdout
