@@ -29,7 +29,7 @@ from snapmem.kernels.assembly import (edge_assembly, edge_stretches, linear_law_
 from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,
                                     linear_barrier, linear_max_step, linear_min_gap)
 from snapmem.kernels.laws import electric_density, law_admissible, law_density, prestretch_chain
-from snapmem.kernels.viscous import edge_internal, log_to_stretch, network_condensed
+from snapmem.kernels.viscous import edge_condensed, log_to_stretch
 from snapmem.model.contact import FRACTION_TO_BOUNDARY
 
 #: The assembly's order: energy and residual (GRADIENT), and the tangent (TANGENT).
@@ -79,15 +79,12 @@ def law_with_networks(lam1, lam2, P, general_law, viscous):
             for k in range(viscous.visc_mu.size):
                 c, mu, jlim = viscous.visc_c[k], viscous.visc_mu[k], viscous.visc_jlim[k]
                 h1, h2 = viscous.zeta_hat[k, 0, e], viscous.zeta_hat[k, 1, e]
+                z1, z2, done, p0, p1, p2, p11, p12, p22 = edge_condensed(
+                    eps1, eps2, viscous.zeta_warm[k, 0, e], viscous.zeta_warm[k, 1, e], h1, h2, mu, jlim, c)
+                ok = ok and done
                 if c > 0.0:
-                    z1, z2, done = edge_internal(eps1, eps2, viscous.zeta_warm[k, 0, e], viscous.zeta_warm[k, 1, e],
-                                                 h1, h2, mu, jlim, c)
-                    ok = ok and done
                     viscous.zeta_warm[k, 0, e] = z1
                     viscous.zeta_warm[k, 1, e] = z2
-                else:
-                    z1, z2 = h1, h2
-                p0, p1, p2, p11, p12, p22 = network_condensed(eps1, eps2, z1, z2, h1, h2, mu, jlim, c)
                 t0 += p0
                 t1 += p1
                 t2 += p2

@@ -89,6 +89,14 @@ class Scheme:
     def new_state(self, anchor: Anchor, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
 
+    def rest_coefficients(self, dt: float, past_dt: float | None) -> tuple:
+        """The step's maps on a state at rest (no velocity: the viscous networks' internal
+        stretches), (h, c_now, c_previous, n_star, n_now, n_previous): the step h [s], the
+        anchor x_hat = c_now x_n + c_previous x_{n-1} and the new state x_{n+1} = n_star y +
+        n_now x_n + n_previous x_{n-1}; ``past_dt`` the last step [s] (None: no history). The
+        numbers :meth:`anchor` and :meth:`new_state` give on unit states, without building them."""
+        raise NotImplementedError
+
     def acceleration(self, anchor: Anchor, v_new: np.ndarray) -> np.ndarray:
         """The mean acceleration over the step (v_{n+1} - v_n) / dt [m/s^2]."""
         return (v_new - anchor.v) / anchor.dt
@@ -114,6 +122,9 @@ class ImplicitEuler(Scheme):
 
     def new_state(self, anchor, y):
         return y, (y - anchor.q) / anchor.h
+
+    def rest_coefficients(self, dt, past_dt):
+        return float(dt), 1.0, 0.0, 1.0, 0.0, 0.0
 
     def local_error(self, dt, a_new, a_prev, free):
         """(dt^2 / 2) max |a_new| over the free degrees of freedom [m]: Euler's local error."""
@@ -150,6 +161,9 @@ class ImplicitMidpoint(Scheme):
         q, v, h = anchor.q, anchor.v, anchor.h
         return 2.0 * y - q, 2.0 * (y - q) / h - v
 
+    def rest_coefficients(self, dt, past_dt):
+        return float(dt / 2), 1.0, 0.0, 2.0, -1.0, 0.0
+
 
 class BDF2(Scheme):
     """Variable-step BDF2 (the robotic scenes use it).
@@ -172,15 +186,26 @@ class BDF2(Scheme):
     def anchor(self, q, v, t, dt, history):
         if history is None:
             return self.start.anchor(q, v, t, dt, history)
-        w = dt / history[2]
-        a0, a1, a2 = (1 + 2 * w) / (1 + w), -(1 + w), w * w / (1 + w)
+        a0, a1, a2 = self.weights(dt, history[2])
         h = dt / a0
         x_hat = -(a1 * q + a2 * history[0]) / a0
         v_hat = -(a1 * v + a2 * history[1]) / a0
         return Anchor(self, x_hat, v_hat, h, dt, t + dt, start=q)
 
+    @staticmethod
+    def weights(dt: float, past_dt: float) -> tuple:
+        """(a0, a1, a2) of the variable step (w = dt / past_dt)."""
+        w = dt / past_dt
+        return (1 + 2 * w) / (1 + w), -(1 + w), w * w / (1 + w)
+
     def new_state(self, anchor, y):
         return y, (y - anchor.q) / anchor.h
+
+    def rest_coefficients(self, dt, past_dt):
+        if past_dt is None:
+            return self.start.rest_coefficients(dt, past_dt)
+        a0, a1, a2 = self.weights(dt, past_dt)
+        return float(dt / a0), float(-(a1 * 1.0) / a0), float(-(a2 * 1.0) / a0), 1.0, 0.0, 0.0
 
     def acceleration(self, anchor, v_new):
         """a_{n+1} = (v_{n+1} - v_hat) / h [m/s^2]."""

@@ -80,22 +80,15 @@ class _Stepper:
 
 def scheme_coefficients(scheme, t: float, dt: float, past_dt: float | None) -> tuple:
     """The linear maps of a scheme's step on a state at rest (the viscous networks' internal
-    stretches have no velocity), read off the scheme with unit states.
+    stretches have no velocity): ``scheme.rest_coefficients`` (t, the step's start [s], does not
+    enter: a scheme's anchor uses it for its load time only).
 
     Returns (h, c_now, c_previous, n_star, n_now, n_previous): the step of the incremental
     potential [s], the anchor x_hat = c_now x_n + c_previous x_{n-1} and the new state
     x_{n+1} = n_star y + n_now x_n + n_previous x_{n-1} from the solve's y; ``past_dt`` the last
     step [s] (None: no history, the c_previous and n_previous are 0).
     """
-    past = None if past_dt is None else (0.0, 0.0, past_dt)
-    now = scheme.anchor(1.0, 0.0, t, dt, past)
-    rest = scheme.anchor(0.0, 0.0, t, dt, past)
-    c_previous = n_previous = 0.0
-    if past is not None:
-        before = scheme.anchor(0.0, 0.0, t, dt, (1.0, 0.0, past_dt))
-        c_previous, n_previous = float(before.q), float(before.new_state(0.0)[0])
-    return (float(now.h), float(now.q), c_previous, float(rest.new_state(1.0)[0]), float(now.new_state(0.0)[0]),
-            n_previous)
+    return scheme.rest_coefficients(dt, past_dt)
 
 
 class _InternalState:
@@ -258,8 +251,9 @@ class _NetworksFrame(Mapping):
         return len(self.KEYS)
 
     def __getitem__(self, key):
-        if key == "zeta":
-            return np.concatenate([term.zeta for term in self._state.terms])     # a copy: the arrays rotate
+        if key == "zeta":                                # a copy: the arrays rotate
+            terms = self._state.terms
+            return terms[0].zeta.copy() if len(terms) == 1 else np.concatenate([term.zeta for term in terms])
         if key == "dissipation":
             return self._state.dissipated
         raise KeyError(key)

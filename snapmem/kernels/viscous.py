@@ -33,7 +33,13 @@ def network_log_derivatives(e1, e2, mu, jlim):
     Neo-Hookean for ``jlim`` = inf, W = (mu/2)(I1 - 3); Gent otherwise, W = -(mu jlim / 2) ln(1 -
     (I1 - 3) / jlim); I1 = exp(2 e1) + exp(2 e2) + exp(-2 e1 - 2 e2). Arrays or numbers.
     """
-    x1, x2, x3 = np.exp(2.0 * e1), np.exp(2.0 * e2), np.exp(-2.0 * (e1 + e2))
+    return network_exp_derivatives(np.exp(2.0 * e1), np.exp(2.0 * e2), np.exp(-2.0 * (e1 + e2)), mu, jlim)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def network_exp_derivatives(x1, x2, x3, mu, jlim):
+    """:func:`network_log_derivatives` from the squared elastic stretches x1 = exp(2 e1), x2 =
+    exp(2 e2), x3 = exp(-2 e1 - 2 e2) (so that a local solve can update them without exponentials)."""
     if jlim == np.inf:
         w = 0.5 * mu * (x1 + x2 + x3 - 3.0)
         f1, f2 = mu * (x1 - x3), mu * (x2 - x3)
@@ -49,13 +55,34 @@ def network_log_derivatives(e1, e2, mu, jlim):
             W11 * i2 * i2 + W1 * i22)
 
 
+#: Below this |s|, :func:`exp_twice` sums exp(2 s)'s series to its (2 s)^5 term: the rest, below
+#: (2e-3)^6 / 720 ~ 1e-19, is under the rounding of the result.
+SERIES_BELOW = 1e-3
+
+
+@njit(cache=True, nogil=True, inline="always")
+def exp_twice(s):
+    """exp(2 s) (a number): its series where |s| < :data:`SERIES_BELOW` (the local Newton's late,
+    small corrections), np.exp otherwise."""
+    if abs(s) < SERIES_BELOW:
+        t = 2.0 * s
+        return 1.0 + t * (1.0 + t * (0.5 + t * (1.0 / 6.0 + t * (1.0 / 24.0 + t * (1.0 / 120.0)))))
+    return np.exp(2.0 * s)
+
+
 @njit(cache=True, nogil=True, inline="always")
 def flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
     """One Newton correction (dz1, dz2) of the implicit flow rule at the internal log stretches
     (z1, z2): the step's incremental potential's gradient in zeta, -f_e + c A (zeta - zeta_hat),
     solved with its Hessian f_ee + c A (positive definite). Numbers or arrays."""
     _, f1, f2, f11, f12, f22 = network_log_derivatives(eps1 - z1, eps2 - z2, mu, jlim)
-    d1, d2 = z1 - zhat1, z2 - zhat2
+    return flow_correction(f1, f2, f11, f12, f22, z1 - zhat1, z2 - zhat2, c)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def flow_correction(f1, f2, f11, f12, f22, d1, d2, c):
+    """:func:`flow_newton_step`'s correction from the network's derivatives (f1, f2, f11, f12, f22)
+    at zeta and d = zeta - zeta_hat."""
     g1 = -f1 + c * (4.0 * d1 + 2.0 * d2)
     g2 = -f2 + c * (2.0 * d1 + 4.0 * d2)
     k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
@@ -83,19 +110,6 @@ def network_internal(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def edge_internal(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
-    """:func:`network_internal` on one edge (numbers): the compiled step's, which needs no arrays;
-    each edge stops at its own convergence. Returns (zeta1, zeta2, converged)."""
-    for _ in range(LOCAL_MAX_ITERATIONS):
-        step1, step2 = flow_newton_step(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c)
-        z1 -= step1
-        z2 -= step2
-        if max(abs(step1), abs(step2)) < LOCAL_STEP:
-            return z1, z2, True
-    return z1, z2, False
-
-
-@njit(cache=True, nogil=True, inline="always")
 def network_condensed(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
     """One network's density in the log strains eps at its internal log stretches zeta: (w, f1, f2,
     f11, f12, f22) [Pa].
@@ -107,7 +121,13 @@ def network_condensed(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
     w, f1, f2, f11, f12, f22 = network_log_derivatives(eps1 - zeta1, eps2 - zeta2, mu, jlim)
     if c == 0.0:
         return w, f1, f2, f11, f12, f22
-    d1, d2 = zeta1 - zhat1, zeta2 - zhat2
+    return condense(w, f1, f2, f11, f12, f22, zeta1 - zhat1, zeta2 - zhat2, c)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def condense(w, f1, f2, f11, f12, f22, d1, d2, c):
+    """The condensed incremental potential of :func:`network_condensed` from the network's density
+    (w, f1, f2, f11, f12, f22) at zeta* and d = zeta* - zeta_hat, c = eta / h > 0."""
     w = w + 0.5 * c * (4.0 * d1 * d1 + 4.0 * d1 * d2 + 4.0 * d2 * d2)
     k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
     det = k11 * k22 - k12 * k12
@@ -119,6 +139,39 @@ def network_condensed(eps1, eps2, zeta1, zeta2, zhat1, zhat2, mu, jlim, c):
     s12 = a11 * f12 + a12 * f22
     s22 = a21 * f12 + a22 * f22
     return w, f1, f2, f11 - s11, f12 - s12, f22 - s22
+
+
+@njit(cache=True, nogil=True, inline="always")
+def edge_condensed(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
+    """One network on one edge (numbers), the compiled step's: the implicit flow rule
+    (:func:`network_internal`'s Newton and stopping rule, from (z1, z2)) and then the condensed
+    density there (:func:`network_condensed`), fused. The squared elastic stretches x_i =
+    exp(2 e_i) are computed once and then follow each correction s (e = eps - zeta grows by s):
+    x_i exp(2 s_i) by :func:`exp_twice`, x3 = 1 / (x1 x2), so that the late iterations and the
+    final evaluation need no exponential (the numbers are :func:`network_condensed`'s at the
+    solution to rounding). c = 0: zeta held at zeta_hat, no solve.
+
+    Returns (zeta1, zeta2, converged, w, f1, f2, f11, f12, f22)."""
+    if c == 0.0:
+        w, f1, f2, f11, f12, f22 = network_log_derivatives(eps1 - zhat1, eps2 - zhat2, mu, jlim)
+        return zhat1, zhat2, True, w, f1, f2, f11, f12, f22
+    x1, x2 = np.exp(2.0 * (eps1 - z1)), np.exp(2.0 * (eps2 - z2))
+    x3 = 1.0 / (x1 * x2)
+    done = False
+    for _ in range(LOCAL_MAX_ITERATIONS):
+        _, f1, f2, f11, f12, f22 = network_exp_derivatives(x1, x2, x3, mu, jlim)
+        step1, step2 = flow_correction(f1, f2, f11, f12, f22, z1 - zhat1, z2 - zhat2, c)
+        z1 -= step1
+        z2 -= step2
+        x1 *= exp_twice(step1)
+        x2 *= exp_twice(step2)
+        x3 = 1.0 / (x1 * x2)
+        if max(abs(step1), abs(step2)) < LOCAL_STEP:
+            done = True
+            break
+    w, f1, f2, f11, f12, f22 = network_exp_derivatives(x1, x2, x3, mu, jlim)
+    w, f1, f2, f11, f12, f22 = condense(w, f1, f2, f11, f12, f22, z1 - zhat1, z2 - zhat2, c)
+    return z1, z2, done, w, f1, f2, f11, f12, f22
 
 
 @njit(cache=True, nogil=True, inline="always")
