@@ -74,13 +74,12 @@ def law_with_networks(lam1, lam2, P, general_law, viscous):
     ok = True
     if viscous is not None:                  # per edge and network, numbers only (no arrays to allocate)
         for e in range(lam1.size):
-            eps1, eps2 = np.log(lam1[e]), np.log(lam2[e])
             t0 = t1 = t2 = t11 = t12 = t22 = 0.0
             for k in range(viscous.visc_mu.size):
                 c, mu, jlim = viscous.visc_c[k], viscous.visc_mu[k], viscous.visc_jlim[k]
                 h1, h2 = viscous.zeta_hat[k, 0, e], viscous.zeta_hat[k, 1, e]
                 z1, z2, done, p0, p1, p2, p11, p12, p22 = edge_condensed(
-                    eps1, eps2, viscous.zeta_warm[k, 0, e], viscous.zeta_warm[k, 1, e], h1, h2, mu, jlim, c)
+                    lam1[e], lam2[e], viscous.zeta_warm[k, 0, e], viscous.zeta_warm[k, 1, e], h1, h2, mu, jlim, c)
                 ok = ok and done
                 if c > 0.0:
                     viscous.zeta_warm[k, 0, e] = z1

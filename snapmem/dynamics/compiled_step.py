@@ -62,6 +62,9 @@ class CompiledStep:
             visc_mu=np.array(viscous.moduli, dtype=float), visc_jlim=np.array(viscous.jlims, dtype=float),
             visc_c=np.zeros(viscous.networks), zeta_hat=np.zeros((viscous.networks, 2, plan.edges.shape[0])),
             zeta_warm=np.zeros((viscous.networks, 2, plan.edges.shape[0])))
+        # in a step: the same, on the open step's own anchor array (the stepper keeps one for the run:
+        # made again only when that array changes) and the term's moduli, with no copies
+        self._step_networks = None
         # (general_law, linear, balls): those terms, None for a kind the scene has not, so that the
         # kernels compile only the terms the scene has (compiled_assembly)
         self.terms = terms
@@ -126,18 +129,22 @@ class CompiledStep:
         if v is None:
             return None
         step = term.open_step
-        edges = self.plan.edges.shape[0]
         if step is None:
             v.visc_c[:] = 0.0
-            v.zeta_hat[:] = term.state(edges)
+            v.zeta_hat[:] = term.state(self.plan.edges.shape[0])
             v.visc_mu[:] = 0.0 if term.limit == "relaxed" else term.moduli
-        else:
-            h, zeta_hat = step
-            v.visc_c[:] = term.viscosities / h
-            v.zeta_hat[:] = zeta_hat
-            v.visc_mu[:] = term.moduli
-        v.zeta_warm[:] = v.zeta_hat
-        return v
+            v.zeta_warm[:] = v.zeta_hat
+            return v
+        h, zeta_hat = step
+        s = self._step_networks
+        if s is None or s.zeta_hat is not zeta_hat or s.visc_mu is not term.moduli:
+            hat = np.ascontiguousarray(zeta_hat, dtype=float)
+            s = Viscous(visc_mu=np.ascontiguousarray(term.moduli, dtype=float), visc_jlim=v.visc_jlim,
+                        visc_c=np.empty_like(v.visc_c), zeta_hat=hat, zeta_warm=np.empty_like(hat))
+            self._step_networks = s if hat is zeta_hat and s.visc_mu is term.moduli else None
+        np.divide(term.viscosities, h, out=s.visc_c)
+        np.copyto(s.zeta_warm, s.zeta_hat)
+        return s
 
     def measures_many(self, Q, loads: list, xi=None) -> tuple:
         """Potential energy [J], volume [m^3] and smallest contact gap [m] of every state (rows of Q,
@@ -180,7 +187,7 @@ class CompiledStep:
         if code == HANDED_BACK:
             return None
         if networks is not None and self._viscous_term.open_step is not None:   # zeta*(y): the driver's close reads it
-            self._viscous_term.hand_over(y, networks.zeta_warm.copy())
+            self._viscous_term.hand_over(y, networks.zeta_warm)     # read by the close, before the next solve
         status, reason = OUTCOMES[code]
         return y, NewtonReport(code == CONVERGED, int(iterations), float(norm), reason, int(cuts), status=status)
 

@@ -142,20 +142,22 @@ def condense(w, f1, f2, f11, f12, f22, d1, d2, c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def edge_condensed(eps1, eps2, z1, z2, zhat1, zhat2, mu, jlim, c):
-    """One network on one edge (numbers), the compiled step's: the implicit flow rule
+def edge_condensed(lam1, lam2, z1, z2, zhat1, zhat2, mu, jlim, c):
+    """One network on one edge at the stretches (lam1, lam2) (numbers), the compiled step's: the implicit flow rule
     (:func:`network_internal`'s Newton and stopping rule, from (z1, z2)) and then the condensed
     density there (:func:`network_condensed`), fused. The squared elastic stretches x_i =
     exp(2 e_i) are computed once and then follow each correction s (e = eps - zeta grows by s):
     x_i exp(2 s_i) by :func:`exp_twice`, x3 = 1 / (x1 x2), so that the late iterations and the
     final evaluation need no exponential (the numbers are :func:`network_condensed`'s at the
-    solution to rounding). c = 0: zeta held at zeta_hat, no solve.
+    solution to rounding). They start from the stretches (lam1, lam2), x_i = lam_i^2 exp(-2 zeta_i),
+    so that no log strain (a logarithm) is needed either. c = 0: zeta held at zeta_hat, no solve.
 
     Returns (zeta1, zeta2, converged, w, f1, f2, f11, f12, f22)."""
     if c == 0.0:
-        w, f1, f2, f11, f12, f22 = network_log_derivatives(eps1 - zhat1, eps2 - zhat2, mu, jlim)
+        x1, x2 = lam1 * lam1 * np.exp(-2.0 * zhat1), lam2 * lam2 * np.exp(-2.0 * zhat2)
+        w, f1, f2, f11, f12, f22 = network_exp_derivatives(x1, x2, 1.0 / (x1 * x2), mu, jlim)
         return zhat1, zhat2, True, w, f1, f2, f11, f12, f22
-    x1, x2 = np.exp(2.0 * (eps1 - z1)), np.exp(2.0 * (eps2 - z2))
+    x1, x2 = lam1 * lam1 * np.exp(-2.0 * z1), lam2 * lam2 * np.exp(-2.0 * z2)
     x3 = 1.0 / (x1 * x2)
     done = False
     for _ in range(LOCAL_MAX_ITERATIONS):
