@@ -51,7 +51,8 @@ LinearContacts = namedtuple("LinearContacts", ["lin_nodes", "lin_ptr", "lin_axis
 #: Viscous networks: moduli, Gent locks (inf: neo-Hookean), c = eta / h of the open step (0: none,
 #: the internal stretches held at zeta_hat), the step's anchor zeta_hat (K, 2, E) and the local
 #: solves' warm start (K, 2, E), updated in place by every assembly (after it: zeta* there).
-Viscous = namedtuple("Viscous", ["visc_mu", "visc_jlim", "visc_c", "zeta_hat", "zeta_warm"])
+#: zeta_warm_exp (K, 2, E) = exp(-2 zeta_warm), kept with it (the local solves need no exponential).
+Viscous = namedtuple("Viscous", ["visc_mu", "visc_jlim", "visc_c", "zeta_hat", "zeta_warm", "zeta_warm_exp"])
 #: The balls (edge contact), with the degree of freedom and border column of a ball's body (-1: fixed).
 Balls = namedtuple("Balls", ["ball_radius", "ball_dhat", "ball_coef", "ball_z0", "ball_dof", "ball_col",
                              "ball_weight"])
@@ -78,12 +79,15 @@ def law_with_networks(lam1, lam2, P, general_law, viscous):
             for k in range(viscous.visc_mu.size):
                 c, mu, jlim = viscous.visc_c[k], viscous.visc_mu[k], viscous.visc_jlim[k]
                 h1, h2 = viscous.zeta_hat[k, 0, e], viscous.zeta_hat[k, 1, e]
-                z1, z2, done, p0, p1, p2, p11, p12, p22 = edge_condensed(
-                    lam1[e], lam2[e], viscous.zeta_warm[k, 0, e], viscous.zeta_warm[k, 1, e], h1, h2, mu, jlim, c)
+                z1, z2, u1, u2, done, p0, p1, p2, p11, p12, p22 = edge_condensed(
+                    lam1[e], lam2[e], viscous.zeta_warm[k, 0, e], viscous.zeta_warm[k, 1, e],
+                    viscous.zeta_warm_exp[k, 0, e], viscous.zeta_warm_exp[k, 1, e], h1, h2, mu, jlim, c)
                 ok = ok and done
                 if c > 0.0:
                     viscous.zeta_warm[k, 0, e] = z1
                     viscous.zeta_warm[k, 1, e] = z2
+                    viscous.zeta_warm_exp[k, 0, e] = u1
+                    viscous.zeta_warm_exp[k, 1, e] = u2
                 t0 += p0
                 t1 += p1
                 t2 += p2

@@ -61,7 +61,8 @@ class CompiledStep:
         self.viscous = None if viscous is None else Viscous(
             visc_mu=np.array(viscous.moduli, dtype=float), visc_jlim=np.array(viscous.jlims, dtype=float),
             visc_c=np.zeros(viscous.networks), zeta_hat=np.zeros((viscous.networks, 2, plan.edges.shape[0])),
-            zeta_warm=np.zeros((viscous.networks, 2, plan.edges.shape[0])))
+            zeta_warm=np.zeros((viscous.networks, 2, plan.edges.shape[0])),
+            zeta_warm_exp=np.ones((viscous.networks, 2, plan.edges.shape[0])))
         # in a step: the same, on the open step's own anchor array (the stepper keeps one for the run:
         # made again only when that array changes) and the term's moduli, with no copies
         self._step_networks = None
@@ -134,16 +135,20 @@ class CompiledStep:
             v.zeta_hat[:] = term.state(self.plan.edges.shape[0])
             v.visc_mu[:] = 0.0 if term.limit == "relaxed" else term.moduli
             v.zeta_warm[:] = v.zeta_hat
+            np.exp(-2.0 * v.zeta_warm, out=v.zeta_warm_exp)
             return v
         h, zeta_hat = step
         s = self._step_networks
         if s is None or s.zeta_hat is not zeta_hat or s.visc_mu is not term.moduli:
             hat = np.ascontiguousarray(zeta_hat, dtype=float)
             s = Viscous(visc_mu=np.ascontiguousarray(term.moduli, dtype=float), visc_jlim=v.visc_jlim,
-                        visc_c=np.empty_like(v.visc_c), zeta_hat=hat, zeta_warm=np.empty_like(hat))
+                        visc_c=np.empty_like(v.visc_c), zeta_hat=hat, zeta_warm=np.empty_like(hat),
+                        zeta_warm_exp=np.empty_like(hat))
             self._step_networks = s if hat is zeta_hat and s.visc_mu is term.moduli else None
         np.divide(term.viscosities, h, out=s.visc_c)
         np.copyto(s.zeta_warm, s.zeta_hat)
+        np.multiply(s.zeta_hat, -2.0, out=s.zeta_warm_exp)
+        np.exp(s.zeta_warm_exp, out=s.zeta_warm_exp)
         return s
 
     def measures_many(self, Q, loads: list, xi=None) -> tuple:

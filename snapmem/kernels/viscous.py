@@ -142,22 +142,24 @@ def condense(w, f1, f2, f11, f12, f22, d1, d2, c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def edge_condensed(lam1, lam2, z1, z2, zhat1, zhat2, mu, jlim, c):
+def edge_condensed(lam1, lam2, z1, z2, u1, u2, zhat1, zhat2, mu, jlim, c):
     """One network on one edge at the stretches (lam1, lam2) (numbers), the compiled step's: the implicit flow rule
     (:func:`network_internal`'s Newton and stopping rule, from (z1, z2)) and then the condensed
     density there (:func:`network_condensed`), fused. The squared elastic stretches x_i =
     exp(2 e_i) are computed once and then follow each correction s (e = eps - zeta grows by s):
     x_i exp(2 s_i) by :func:`exp_twice`, x3 = 1 / (x1 x2), so that the late iterations and the
     final evaluation need no exponential (the numbers are :func:`network_condensed`'s at the
-    solution to rounding). They start from the stretches (lam1, lam2), x_i = lam_i^2 exp(-2 zeta_i),
-    so that no log strain (a logarithm) is needed either. c = 0: zeta held at zeta_hat, no solve.
+    solution to rounding). They start from the stretches (lam1, lam2) and the start's u_i =
+    exp(-2 zeta_i) (kept with zeta from the last solve, which updates it likewise), x_i = lam_i^2
+    u_i: neither a log strain (a logarithm) nor an exponential is needed but for large corrections.
+    c = 0: zeta held at zeta_hat, no solve (u_i ignored).
 
-    Returns (zeta1, zeta2, converged, w, f1, f2, f11, f12, f22)."""
+    Returns (zeta1, zeta2, u1, u2, converged, w, f1, f2, f11, f12, f22)."""
     if c == 0.0:
         x1, x2 = lam1 * lam1 * np.exp(-2.0 * zhat1), lam2 * lam2 * np.exp(-2.0 * zhat2)
         w, f1, f2, f11, f12, f22 = network_exp_derivatives(x1, x2, 1.0 / (x1 * x2), mu, jlim)
-        return zhat1, zhat2, True, w, f1, f2, f11, f12, f22
-    x1, x2 = lam1 * lam1 * np.exp(-2.0 * z1), lam2 * lam2 * np.exp(-2.0 * z2)
+        return zhat1, zhat2, u1, u2, True, w, f1, f2, f11, f12, f22
+    x1, x2 = lam1 * lam1 * u1, lam2 * lam2 * u2
     x3 = 1.0 / (x1 * x2)
     done = False
     for _ in range(LOCAL_MAX_ITERATIONS):
@@ -165,15 +167,18 @@ def edge_condensed(lam1, lam2, z1, z2, zhat1, zhat2, mu, jlim, c):
         step1, step2 = flow_correction(f1, f2, f11, f12, f22, z1 - zhat1, z2 - zhat2, c)
         z1 -= step1
         z2 -= step2
-        x1 *= exp_twice(step1)
-        x2 *= exp_twice(step2)
+        grow1, grow2 = exp_twice(step1), exp_twice(step2)
+        u1 *= grow1
+        u2 *= grow2
+        x1 *= grow1
+        x2 *= grow2
         x3 = 1.0 / (x1 * x2)
         if max(abs(step1), abs(step2)) < LOCAL_STEP:
             done = True
             break
     w, f1, f2, f11, f12, f22 = network_exp_derivatives(x1, x2, x3, mu, jlim)
     w, f1, f2, f11, f12, f22 = condense(w, f1, f2, f11, f12, f22, z1 - zhat1, z2 - zhat2, c)
-    return z1, z2, done, w, f1, f2, f11, f12, f22
+    return z1, z2, u1, u2, done, w, f1, f2, f11, f12, f22
 
 
 @njit(cache=True, nogil=True, inline="always")
