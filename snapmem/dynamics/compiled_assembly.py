@@ -105,6 +105,17 @@ def law_with_networks(lam1, lam2, P, general_law, viscous):
 
 
 @njit(cache=True, nogil=True)
+def start_networks(viscous):
+    """The local solves' warm start at the step's anchor: zeta_warm = zeta_hat, zeta_warm_exp =
+    exp(-2 zeta_hat) (before a step's first assembly)."""
+    for k in range(viscous.zeta_hat.shape[0]):
+        for i in range(2):
+            for e in range(viscous.zeta_hat.shape[2]):
+                viscous.zeta_warm[k, i, e] = viscous.zeta_hat[k, i, e]
+                viscous.zeta_warm_exp[k, i, e] = np.exp(-2.0 * viscous.zeta_hat[k, i, e])
+
+
+@njit(cache=True, nogil=True)
 def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia, anchor, momentum, order):
     """The step's incremental potential Pi(q) + (1/2) d^T diag(inertia) d - momentum . d, d = (q -
     anchor) on the free degrees of freedom: (energy, residual, lower, border, corner, floor); the

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import TANGENT, admissible, assemble, law_with_networks, max_step, state_ok
+from snapmem.dynamics.compiled_assembly import (TANGENT, admissible, assemble, law_with_networks, max_step,
+                                                start_networks, state_ok)
 from snapmem.kernels.assembly import edge_stretches
 from snapmem.kernels.bordered import band_solve, bordered_solve
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
@@ -43,8 +44,8 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
     term's rounding floor (:func:`snapmem.solvers.rules.inertia_tolerance`), then damped Newton on
     the step's incremental potential: snapmem.solvers.newton.newton with merit='energy' (which
     documents every rule here). ``general_law``, ``linear``, ``balls``, ``viscous``: those terms or None
-    (see :mod:`snapmem.dynamics.compiled_assembly`; the networks' zeta*(y) is left in
-    ``viscous.zeta_warm``). Returns (y, code, iterations, cuts, norm), code one
+    (see :mod:`snapmem.dynamics.compiled_assembly`; the networks' local solves start at their
+    anchor, :func:`start_networks`, and zeta*(y) is left in ``viscous.zeta_warm``). Returns (y, code, iterations, cuts, norm), code one
     of this module's (an index into OUTCOMES, or HANDED_BACK).
 
     One kernel, not a set-up calling a Newton kernel: numba optimises a kernel together with all
@@ -63,6 +64,8 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
             break
         largest = max(largest, inertia[i])
     tol = inertia_tolerance(tol, largest, size)
+    if viscous is not None:
+        start_networks(viscous)
     guess = anchor + h * velocity
     if admissible(guess, P, general_law, linear, balls):
         q = guess.copy()

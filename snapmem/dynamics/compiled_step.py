@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, Viscous, assemble,
-                                                contact_gaps)
+                                                contact_gaps, start_networks)
 from snapmem.dynamics.compiled_measures import frames_measures
 from snapmem.dynamics.compiled_newton import HANDED_BACK, OUTCOMES, CONVERGED, time_step
 from snapmem.kernels.laws import LAW_LINEAR
@@ -118,8 +118,10 @@ class CompiledStep:
         inertia = np.zeros(n_free) if inertia is None else inertia
         anchor = q if anchor is None else anchor
         momentum = np.zeros(n_free) if momentum is None else momentum
-        return assemble(q, self.plan, *self.terms, self._open_networks(), *self._loads(loads), inertia, anchor,
-                        momentum, TANGENT)
+        networks = self._open_networks()
+        if networks is not None:
+            start_networks(networks)
+        return assemble(q, self.plan, *self.terms, networks, *self._loads(loads), inertia, anchor, momentum, TANGENT)
 
     def _open_networks(self):
         """The viscous networks' arrays for the term's present state (None without networks): in an
@@ -134,8 +136,6 @@ class CompiledStep:
             v.visc_c[:] = 0.0
             v.zeta_hat[:] = term.state(self.plan.edges.shape[0])
             v.visc_mu[:] = 0.0 if term.limit == "relaxed" else term.moduli
-            v.zeta_warm[:] = v.zeta_hat
-            np.exp(-2.0 * v.zeta_warm, out=v.zeta_warm_exp)
             return v
         h, zeta_hat = step
         s = self._step_networks
@@ -146,9 +146,6 @@ class CompiledStep:
                         zeta_warm_exp=np.empty_like(hat))
             self._step_networks = s if hat is zeta_hat and s.visc_mu is term.moduli else None
         np.divide(term.viscosities, h, out=s.visc_c)
-        np.copyto(s.zeta_warm, s.zeta_hat)
-        np.multiply(s.zeta_hat, -2.0, out=s.zeta_warm_exp)
-        np.exp(s.zeta_warm_exp, out=s.zeta_warm_exp)
         return s
 
     def measures_many(self, Q, loads: list, xi=None) -> tuple:

@@ -247,6 +247,9 @@ class _NetworksFrame(Mapping):
     def __iter__(self):
         return iter(self.KEYS)
 
+    def keys(self):                    # what {**frame} asks for: the names, without a view
+        return self.KEYS
+
     def __len__(self) -> int:
         return len(self.KEYS)
 
