@@ -86,8 +86,8 @@ def flow_correction(f1, f2, f11, f12, f22, d1, d2, c):
     g1 = -f1 + c * (4.0 * d1 + 2.0 * d2)
     g2 = -f2 + c * (2.0 * d1 + 4.0 * d2)
     k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
-    inverse_det = 1.0 / (k11 * k22 - k12 * k12)     # one division (the local solves' dearest operation)
-    return (k22 * g1 - k12 * g2) * inverse_det, (k11 * g2 - k12 * g1) * inverse_det
+    det = k11 * k22 - k12 * k12
+    return (k22 * g1 - k12 * g2) / det, (k11 * g2 - k12 * g1) / det
 
 
 @njit(cache=True, nogil=True)
@@ -130,8 +130,8 @@ def condense(w, f1, f2, f11, f12, f22, d1, d2, c):
     (w, f1, f2, f11, f12, f22) at zeta* and d = zeta* - zeta_hat, c = eta / h > 0."""
     w = w + 0.5 * c * (4.0 * d1 * d1 + 4.0 * d1 * d2 + 4.0 * d2 * d2)
     k11, k12, k22 = f11 + 4.0 * c, f12 + 2.0 * c, f22 + 4.0 * c
-    inverse_det = 1.0 / (k11 * k22 - k12 * k12)
-    i11, i12, i22 = k22 * inverse_det, -k12 * inverse_det, k11 * inverse_det
+    det = k11 * k22 - k12 * k12
+    i11, i12, i22 = k22 / det, -k12 / det, k11 / det
     # F K^-1 F with F = [[f11, f12], [f12, f22]] symmetric
     a11, a12 = f11 * i11 + f12 * i12, f11 * i12 + f12 * i22
     a21, a22 = f12 * i11 + f22 * i12, f12 * i12 + f22 * i22
@@ -185,8 +185,8 @@ def edge_condensed(lam1, lam2, z1, z2, u1, u2, zhat1, zhat2, mu, jlim, c):
 def log_to_stretch(lam1, lam2, w, f1, f2, f11, f12, f22):
     """A density's derivatives in the log strains as derivatives in the stretches: w_i = f_i / lam_i,
     w_ij = (f_ij - delta_ij f_i) / (lam_i lam_j). Returns (w, w1, w2, w11, w12, w22)."""
-    i1, i2 = 1.0 / lam1, 1.0 / lam2
-    return w, f1 * i1, f2 * i2, (f11 - f1) * (i1 * i1), f12 * (i1 * i2), (f22 - f2) * (i2 * i2)
+    return (w, f1 / lam1, f2 / lam2, (f11 - f1) / (lam1 * lam1), f12 / (lam1 * lam2),
+            (f22 - f2) / (lam2 * lam2))
 
 
 @njit(cache=True, nogil=True)
