@@ -93,18 +93,35 @@ def _start_simulate(out):
     return run, master
 
 
-def _wait_for_steps(master, steps=6, timeout=90.0):
-    """Read the progress line until it shows ``steps`` redraws with t > 0."""
-    seen, text, deadline = 0, "", time.monotonic() + timeout
-    while time.monotonic() < deadline and seen < steps:
+def _read_until(master, done, timeout=90.0) -> bool:
+    """Read the pseudo-terminal until ``done(text so far)`` or ``timeout`` [s]; whether it was done."""
+    text, deadline = "", time.monotonic() + timeout
+    while time.monotonic() < deadline and not done(text):
         ready, _, _ = select.select([master], [], [], 0.5)
         if ready:
             try:
                 text += os.read(master, 4096).decode(errors="replace")
             except OSError:
                 break
-            seen = len(re.findall(r"t = +[0-9.]*[1-9]", text))
-    return seen >= steps
+    return done(text)
+
+
+def _wait_for_steps(master, steps=6, timeout=90.0):
+    """Read the progress line until it shows ``steps`` redraws with t > 0."""
+    return _read_until(master, lambda text: len(re.findall(r"t = +[0-9.]*[1-9]", text)) >= steps, timeout)
+
+
+def _interrupt(run, master, started, sig) -> str:
+    """Send ``sig`` to ``run`` once ``started(master)``; its stdout. The process never outlives the test."""
+    try:
+        assert started(master), "the run did not start stepping"
+        run.send_signal(sig)
+        stdout, _ = run.communicate(timeout=60)
+    finally:
+        os.close(master)
+        if run.poll() is None:
+            run.kill()
+    return stdout
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
@@ -114,14 +131,7 @@ def test_interrupted_simulate_saves_the_frames_so_far(tmp_path, sig):
     from snapmem.dynamics.trajectory import Trajectory
     out = tmp_path / "f.npz"
     run, master = _start_simulate(out)
-    try:
-        assert _wait_for_steps(master), "the simulation did not start stepping"
-        run.send_signal(sig)
-        stdout, _ = run.communicate(timeout=60)
-    finally:
-        os.close(master)
-        if run.poll() is None:
-            run.kill()
+    stdout = _interrupt(run, master, _wait_for_steps, sig)
     assert run.returncode == 130, stdout
     traj = Trajectory.load(out)
     assert len(traj["t"]) >= 2 and 0.0 < traj["t"][-1] < 1000.0
@@ -157,17 +167,8 @@ def test_interrupted_trace_writes_the_branch_so_far(tmp_path):
                             "--until", "stretch=1e6", "--max-steps", "100000", "--out", "b.csv", "--points", "p.csv"],
                            cwd=tmp_path, env=ENV, stdout=subprocess.PIPE, stderr=slave, text=True)
     os.close(slave)
-    try:
-        text, deadline = "", time.monotonic() + 90
-        while not any(int(n) >= 5 for n in re.findall(r"step (\d+) ", text)) and time.monotonic() < deadline:
-            if select.select([master], [], [], 0.5)[0]:
-                text += os.read(master, 4096).decode(errors="replace")
-        run.send_signal(signal.SIGINT)
-        stdout, _ = run.communicate(timeout=60)
-    finally:
-        os.close(master)
-        if run.poll() is None:
-            run.kill()
+    fifth_step = lambda m: _read_until(m, lambda text: any(int(n) >= 5 for n in re.findall(r"step (\d+) ", text)))
+    stdout = _interrupt(run, master, fifth_step, signal.SIGINT)
     assert run.returncode == 130, stdout
     assert "status: interrupted after" in stdout
     assert sorted(p.name for p in tmp_path.iterdir()) == ["b.csv", "b.csv.json", "b.npz", "p.csv", "p.csv.json"]
