@@ -274,7 +274,7 @@ class ChamberCompiledStep:
         if any(s is None or s.viscous is not None or s.terms[2] is not None for s in steps):
             return None
         for i, (s, own) in enumerate(zip(steps, scene.chamber_of)):
-            if own is not None and not s._pressure:        # a chamber's work other than the swept volume's
+            if own is not None and not s.has_pressure:        # a chamber's work other than the swept volume's
                 return None
         linear = [s.terms[1] for s in steps]
         if all(c is None for c in linear):
@@ -297,7 +297,7 @@ class ChamberCompiledStep:
         for i, (step, own) in enumerate(zip(self.steps, scene.chamber_of)):
             # a prescribed chamber pressure is a load; an unknown one is the kernel's (mem_unknown)
             pressure = 0.0 if own is None or self.mem_unknown[i] >= 0 else own[1] * loads[scene.pressure_name(own[0])]
-            mem_pressure[i], a_el[i] = step._loads({"pressure": pressure, "voltage": loads.get(f"voltage_{i + 1}", 0.0)})
+            mem_pressure[i], a_el[i] = step.kernel_loads({"pressure": pressure, "voltage": loads.get(f"voltage_{i + 1}", 0.0)})
         k = len(self.multiplied)
         kinds = _ints([kind for kind, _ in targets]).reshape(k)
         tparams = np.zeros((k, TARGET_PARAMETERS))

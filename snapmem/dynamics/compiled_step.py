@@ -70,7 +70,7 @@ class CompiledStep:
         # kernels compile only the terms the scene has (compiled_assembly)
         self.terms = terms
         self._electric = electric            # (eps / (2 H^2)) of each electric term
-        self._pressure = pressure
+        self.has_pressure = pressure
         # (output name, index in the kernel's contact arrays) of every contact, in the scene's order
         self._contacts = list(zip(contact_names(scene), contact_slots))
 
@@ -105,8 +105,10 @@ class CompiledStep:
         return cls(scene, plan, terms, tuple(d.coefficient for d in electric), bool(pressure), slots,
                    viscous[0].term if viscous else None)
 
-    def _loads(self, loads) -> tuple:
-        pressure = float(loads["pressure"]) if self._pressure else 0.0
+    def kernel_loads(self, loads) -> tuple:
+        """(pressure [Pa], a_el [Pa]) the kernels take for ``loads``: a_el = sum of eps/(2 H^2) phi^2
+        over the electric terms. The compiled chamber step calls it per membrane."""
+        pressure = float(loads["pressure"]) if self.has_pressure else 0.0
         a_el = float(sum(c * float(loads["voltage"]) ** 2 for c in self._electric))   # float64 for numba, always
         return pressure, a_el
 
@@ -121,7 +123,7 @@ class CompiledStep:
         networks = self._open_networks()
         if networks is not None:
             start_networks(networks)
-        return assemble(q, self.plan, *self.terms, networks, *self._loads(loads), inertia, anchor, momentum, TANGENT)
+        return assemble(q, self.plan, *self.terms, networks, *self.kernel_loads(loads), inertia, anchor, momentum, TANGENT)
 
     def _open_networks(self):
         """The viscous networks' arrays for the term's present state (None without networks): in an
@@ -155,7 +157,7 @@ class CompiledStep:
         :func:`snapmem.model.contact.contact_report` give, in one compiled call. With viscous
         networks, ``xi`` (T, K, 2, E) are the frames' internal stretches: their stored energy joins
         the potential."""
-        coefficients = np.array([self._loads(each) for each in loads], dtype=float).reshape(-1, 2)   # (pressure, a_el)
+        coefficients = np.array([self.kernel_loads(each) for each in loads], dtype=float).reshape(-1, 2)   # (pressure, a_el)
         energy, volume, forces, gaps = frames_measures(np.ascontiguousarray(Q, dtype=float), self.plan, *self.terms,
                                                        coefficients[:, 0].copy(), coefficients[:, 1].copy())
         columns = {}
@@ -181,7 +183,7 @@ class CompiledStep:
         the free degrees of freedom, from the guess anchor + h velocity (``fallback``, the present
         state, if the guess is outside the domain). (y, NewtonReport), or None to hand the step
         back to the general path."""
-        pressure, a_el = self._loads(loads)
+        pressure, a_el = self.kernel_loads(loads)
         networks = self._open_networks()
         y, code, iterations, cuts, norm = time_step(
             anchor, velocity, h, mass, damping, fallback, self.plan, *self.terms, networks, pressure, a_el, tol,
