@@ -51,6 +51,8 @@ def draw(t: pd.DataFrame, path) -> None:
     for (kind, mode), sub in t.groupby(["kind", "mode"]):
         ax.plot(sub["nodes"], sub["error"].abs(), "o-", ms=3, label=kind if mode < 0 else f"{kind} n = {mode}")
     style.log_axis(ax)
+    from matplotlib import ticker
+    ax.xaxis.set_major_locator(ticker.FixedLocator(sorted(t["nodes"].unique())))   # a tick at every mesh
     ax.set_xlabel(style.label("nodes"))
     ax.set_ylabel(r"$|\lambda - \lambda_{\mathrm{criterion}}|$")
     ax.set_title(f"balloon, {style.value_label('E_hat', t['E_hat_value'].iloc[0])}, support {t['support'].iloc[0]}")

@@ -24,7 +24,9 @@ def main(argv=None):
     for name in ("snap", "snap_back"):
         if ev.get(name) is not None:
             axes[0].axvline(ev[name], ls=":", c="k")
-            axes[0].text(ev[name], cycle["volume"].max() * 0.9, f" {name.replace('_', ' ')} {ev[name]:.2f} s", fontsize=7)
+            # at the top of the axes, on the side of the line where the volume is low (clear of the curve)
+            axes[0].text(ev[name], 0.97, f" {name.replace('_', ' ')} {ev[name]:.2f} s ", fontsize=7, va="top",
+                         ha="right" if name == "snap" else "left", transform=axes[0].get_xaxis_transform())
     axes[1].plot(cycle["t"], cycle["pressure"], label=style.label("pressure", si=True))
     twin = axes[1].twinx()
     twin.plot(cycle["t"], cycle["voltage"], color="C1", ls="--", label=style.label("voltage"))
