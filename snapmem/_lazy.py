@@ -110,6 +110,7 @@ class Kernel:
         self.py_func = py_func
         self.options = options
         self._dispatcher = None
+        self._twin = None                   # what runs as Python instead of py_func (:meth:`python_twin`)
         self._interpreted = False           # runs as Python in this process (not in the cache yet)
         self._decided = False
         self.__name__ = py_func.__name__
@@ -137,6 +138,18 @@ class Kernel:
                     cell.cell_contents = cell.cell_contents.dispatcher
             _rebind(self, self._dispatcher)
         return self._dispatcher
+
+    def python_twin(self, function):
+        """Decorator: ``function`` runs instead of ``py_func`` while the kernel runs as Python. For loop
+        kernels slow as Python: the same floating-point operations in the same order, on Python floats
+        or whole columns, so the kernel's numbers bit for bit (tests/test_python_twins.py)."""
+        self._twin = function
+        return function
+
+    @property
+    def python(self):
+        """What runs while the kernel runs as Python: its twin if it has one, else ``py_func``."""
+        return self._twin or self.py_func
 
     @property
     def signatures(self) -> list:
@@ -250,7 +263,7 @@ def _interpret_when_uncached(kernel: "Kernel") -> bool:
 def _run_as_python(kernel: "Kernel", args):
     depth = getattr(_nesting, "depth", 0)
     if depth:
-        return kernel.py_func(*args)
+        return kernel.python(*args)
     key = (kernel.__module__, kernel.__qualname__)
     if key not in _seen:
         _seen[key] = set()
@@ -265,7 +278,7 @@ def _run_as_python(kernel: "Kernel", args):
     start = time.perf_counter()
     try:
         with np.errstate(all="ignore"):       # compiled kernels warn of no overflow (inf, NaN) either
-            return kernel.py_func(*args)
+            return kernel.python(*args)
     finally:
         _nesting.depth = depth
         _spent[0] += time.perf_counter() - start

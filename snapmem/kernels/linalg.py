@@ -77,6 +77,46 @@ def band_ldlt(lower: np.ndarray, b: int):
     return F, negative, zero, gamma / (scale if scale > 0.0 else 1.0)
 
 
+@band_ldlt.python_twin
+def _band_ldlt_python(lower, b):
+    """:func:`band_ldlt`'s loops on Python floats (the kernel's operations, in its order)."""
+    n = lower.shape[1]
+    band = lower.tolist()
+    F = [[0.0] * (b + 1) for _ in range(n)]
+    negative = 0
+    zero = 0
+    scale = 0.0
+    gamma = 0.0
+    diagonal = band[0]
+    for j in range(n):
+        s = diagonal[j]
+        scale = max(scale, abs(s))
+        g = 0.0
+        Fj = F[j]
+        for k in range(max(0, j - b), j):
+            Fk = F[k]
+            lk = Fk[j - k]
+            t = lk * lk * Fk[0]
+            s -= t
+            g += abs(t)
+        for i in range(j + 1, min(n, j + b + 1)):
+            scale = max(scale, abs(band[i - j][j]))
+        if s < 0.0:
+            negative += 1
+        elif s == 0.0:
+            zero += 1
+            s = 1e-300 + 1e-14 * scale
+        Fj[0] = s
+        gamma = max(gamma, g + abs(s))
+        for i in range(j + 1, min(n, j + b + 1)):
+            t = band[i - j][j]
+            for k in range(max(0, i - b), j):
+                Fk = F[k]
+                t -= Fk[i - k] * Fk[j - k] * Fk[0]
+            Fj[i - j] = t / s
+    return np.array(F, dtype=np.float64).reshape(n, b + 1), negative, zero, gamma / (scale if scale > 0.0 else 1.0)
+
+
 @njit(cache=True, nogil=True)
 def band_ldlt_solve(F: np.ndarray, x: np.ndarray):
     """Solve L D L^T x = rhs in place, x of shape (n, m) holding the m right-hand sides on entry
@@ -101,6 +141,37 @@ def band_ldlt_solve(F: np.ndarray, x: np.ndarray):
     return x
 
 
+@band_ldlt_solve.python_twin
+def _band_ldlt_solve_python(F, x):
+    """:func:`band_ldlt_solve` on Python floats (the kernel's operations, in its order)."""
+    if x.shape[1] == 1:
+        _ldlt_solve_vector(F, x[:, 0])
+        return x
+    n, b = F.shape[0], F.shape[1] - 1
+    cols = range(x.shape[1])
+    factors = F.tolist()
+    rows = x.tolist()
+    for j in range(n):
+        row = rows[j]
+        Fj = factors[j]
+        for m in range(1, min(b, n - 1 - j) + 1):
+            l = Fj[m]
+            target = rows[j + m]
+            for c in cols:
+                target[c] -= l * row[c]
+    for j in range(n - 1, -1, -1):
+        Fj = factors[j]
+        inv = 1.0 / Fj[0]
+        row = rows[j]
+        for c in cols:
+            s = row[c] * inv
+            for m in range(1, min(b, n - 1 - j) + 1):
+                s -= Fj[m] * rows[j + m][c]
+            row[c] = s
+    x[:] = rows
+    return x
+
+
 @njit(cache=True, nogil=True)
 def _ldlt_solve_vector(F, x):
     """:func:`band_ldlt_solve` for one right-hand side (its own loop: faster than the loop over columns)."""
@@ -114,6 +185,26 @@ def _ldlt_solve_vector(F, x):
         for m in range(1, min(b, n - 1 - j) + 1):
             s -= F[j, m] * x[j + m]
         x[j] = s
+
+
+@_ldlt_solve_vector.python_twin
+def _ldlt_solve_vector_python(F, x):
+    """:func:`_ldlt_solve_vector` on Python floats."""
+    n, b = F.shape[0], F.shape[1] - 1
+    factors = F.tolist()
+    v = x.tolist()
+    for j in range(n):
+        xj = v[j]
+        Fj = factors[j]
+        for m in range(1, min(b, n - 1 - j) + 1):
+            v[j + m] -= Fj[m] * xj
+    for j in range(n - 1, -1, -1):
+        Fj = factors[j]
+        s = v[j] * (1.0 / Fj[0])
+        for m in range(1, min(b, n - 1 - j) + 1):
+            s -= Fj[m] * v[j + m]
+        v[j] = s
+    x[:] = v
 
 
 @njit(cache=True, nogil=True)
@@ -138,6 +229,23 @@ def orthonormal(X: np.ndarray) -> np.ndarray:
         norm = np.sqrt(norm)
         for i in range(n):
             Q[i, c] /= norm
+    return Q
+
+
+@orthonormal.python_twin
+def _orthonormal_python(X):
+    """:func:`orthonormal` a column at a time: each sum over rows accumulated in the kernel's order
+    (``np.add.accumulate`` adds strictly in sequence, unlike ``np.sum``), from 0.0 as the kernel's."""
+    n, m = X.shape
+    Q = X.copy()
+    for c in range(m):
+        for _ in range(2):
+            if c:
+                r = 0.0 + np.add.accumulate(Q[:, :c] * Q[:, c:c + 1], axis=0)[-1]
+                for d in range(c):
+                    Q[:, c] -= r[d] * Q[:, d]
+        norm = np.sqrt(0.0 + np.add.accumulate(Q[:, c] * Q[:, c])[-1])
+        Q[:, c] /= norm
     return Q
 
 
@@ -223,6 +331,29 @@ def ritz_step(V: np.ndarray, W: np.ndarray):
     return theta, orthonormal(X)
 
 
+@ritz_step.python_twin
+def _ritz_step_python(V, W):
+    """:func:`ritz_step` on whole arrays, each sum in the kernel's order (see :func:`_orthonormal_python`)."""
+    n, m = V.shape
+    H = 0.0 + np.add.accumulate(V[:, :, None] * W[:, None, :], axis=0)[-1]
+    for a in range(m):
+        for c in range(a):
+            H[a, c] = H[c, a] = 0.5 * (H[a, c] + H[c, a])
+    mu, Y = symmetric_eig(H)
+    order = list(range(m))
+    for a in range(1, m):
+        c = a
+        while c > 0 and abs(mu[order[c]]) > abs(mu[order[c - 1]]):
+            order[c], order[c - 1] = order[c - 1], order[c]
+            c -= 1
+    X = np.zeros((n, m))
+    Yo = Y[:, order]
+    for a in range(m):
+        X += W[:, a:a + 1] * Yo[a]
+    theta = 1.0 / mu[order]
+    return theta, orthonormal(X)
+
+
 @njit(cache=True, nogil=True)
 def band_matvec(lower: np.ndarray, x: np.ndarray):
     """K @ x for a symmetric band matrix given by its lower band (b + 1, n) (as :func:`band_ldlt`)
@@ -239,6 +370,19 @@ def band_matvec(lower: np.ndarray, x: np.ndarray):
             for c in range(cols):
                 y[j + m, c] += k * x[j, c]
                 y[j, c] += k * x[j + m, c]
+    return y
+
+
+@band_matvec.python_twin
+def _band_matvec_python(lower, x):
+    """:func:`band_matvec` by diagonals: each y[i] gets the kernel's terms in the kernel's order (the
+    diagonal, then K[i, i - m] x[i - m] for m = b..1, then K[i, i + m] x[i + m] for m = 1..b)."""
+    b, n = lower.shape[0] - 1, lower.shape[1]
+    y = lower[0][:, None] * x
+    for m in range(min(b, n - 1), 0, -1):
+        y[m:] += lower[m, :n - m][:, None] * x[:n - m]
+    for m in range(1, min(b, n - 1) + 1):
+        y[:n - m] += lower[m, :n - m][:, None] * x[m:]
     return y
 
 

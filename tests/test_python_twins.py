@@ -1,0 +1,101 @@
+"""The Python twins of the loop kernels (snapmem._lazy.Kernel.python_twin): what runs on first use,
+before numba's cache holds a kernel. Each must give the compiled kernel's numbers bit for bit, on
+any shape the kernel takes, including the edge cases of the band (n <= b, one right-hand side)."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from snapmem.kernels import linalg
+
+
+def compiled(kernel):
+    """The numba dispatcher of a kernel (the module's name may already be rebound to it)."""
+    return getattr(kernel, "dispatcher", kernel)
+
+
+KERNELS = {name: getattr(linalg, name) for name in
+           ("band_ldlt", "band_ldlt_solve", "_ldlt_solve_vector", "orthonormal", "ritz_step", "band_matvec")}
+
+
+def band(rng, n, b, shift):
+    lower = rng.normal(size=(b + 1, n))
+    lower[0] += shift                    # shift 0: indefinite, with negative pivots
+    return lower
+
+
+def same(a, b):
+    return np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
+
+
+shapes = st.tuples(st.integers(1, 40), st.integers(1, 5), st.integers(1, 9), st.integers(0, 2 ** 32 - 1),
+                   st.sampled_from([0.0, 4.0]))
+
+
+@settings(max_examples=40, deadline=None)
+@given(shapes)
+def test_band_twins_are_the_compiled_kernels_bit_for_bit(shape):
+    n, b, cols, seed, shift = shape
+    rng = np.random.default_rng(seed)
+    lower = band(rng, n, b, shift)
+    K = KERNELS
+    expected = compiled(K["band_ldlt"])(lower, b)
+    got = K["band_ldlt"]._twin(lower, b)
+    assert same(got[0], expected[0]) and tuple(got[1:]) == tuple(expected[1:])
+    F = expected[0]
+    x = rng.normal(size=(n, cols))
+    a, c = x.copy(), x.copy()
+    K["band_ldlt_solve"]._twin(F, a)
+    compiled(K["band_ldlt_solve"])(F, c)
+    assert same(a, c)
+    v = rng.normal(size=n)
+    a, c = v.copy(), v.copy()
+    K["_ldlt_solve_vector"]._twin(F, a)
+    compiled(K["_ldlt_solve_vector"])(F, c)
+    assert same(a, c)
+    assert same(K["band_matvec"]._twin(lower, x), compiled(K["band_matvec"])(lower, x))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 60), st.integers(1, 10), st.integers(0, 2 ** 32 - 1))
+def test_subspace_twins_are_the_compiled_kernels_bit_for_bit(n, m, seed):
+    m = min(m, n)
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(n, m))
+    orthonormal, ritz = KERNELS["orthonormal"], KERNELS["ritz_step"]
+    V = compiled(orthonormal)(X)
+    assert same(orthonormal._twin(X), V)
+    W = rng.normal(size=(n, m))
+    theta_t, V_t = ritz._twin(V, W)
+    theta_c, V_c = compiled(ritz)(V, W)
+    assert same(theta_t, theta_c) and same(V_t, V_c)
+
+
+def test_a_solve_of_a_singular_leading_block_replaces_the_zero_pivot_in_both():
+    lower = np.array([[0.0, 2.0, 3.0], [1.0, 1.0, 0.0]])
+    got, expected = KERNELS["band_ldlt"]._twin(lower, 1), compiled(KERNELS["band_ldlt"])(lower, 1)
+    assert got[2] == expected[2] == 1 and same(got[0], expected[0])
+
+
+def test_the_twin_runs_while_the_kernel_runs_as_python(monkeypatch):
+    import snapmem._lazy as lazy
+    calls = []
+    kernel = lazy.Kernel(lambda x: x + 1.0, {"cache": True})
+
+    @kernel.python_twin
+    def plus_one(x):
+        calls.append(x)
+        return x + 1.0
+
+    assert kernel.python is plus_one
+    monkeypatch.setitem(lazy._policy, "compile", False)
+    monkeypatch.setattr(lazy, "_in_cache", lambda k: False)
+    monkeypatch.setattr(lazy, "_seen", {})
+    assert kernel(1.0) == 2.0 and calls == [1.0]
+
+
+@pytest.mark.parametrize("name", sorted(KERNELS))
+def test_every_twin_keeps_the_kernels_name_and_is_not_what_numba_compiles(name):
+    kernel = KERNELS[name]
+    assert kernel._twin is not None and kernel._twin is not kernel.py_func
+    assert kernel.__name__ == name
