@@ -41,3 +41,38 @@ def test_snapmem_kernels_use_the_stamped_locator_and_others_numbas_own():
     exec(compile("def twice(a):\n    return 2 * a\n", os.path.abspath(__file__), "exec"), namespace)
     theirs = numba.njit(cache=True)(namespace["twice"])
     assert not type(theirs._cache._impl.locator).__name__.startswith("SnapmemStamped")
+
+
+LOAD_THEN_COMPILE = """
+import sys, numpy as np
+from snapmem.kernels.linalg import band_ldlt, band_matvec
+F, negative, zero, growth = band_ldlt(np.array([[4.0, 4.0, 4.0], [1.0, 1.0, 0.0]]), 1)
+loaded_without_registries = "numba.np.arraymath" not in sys.modules
+import numba
+@numba.njit
+def outside(x):                     # not snapmem's: compiled here, after the cached loads
+    return np.sum(x * 2.0)
+print("@", loaded_without_registries, negative, repr(float(F[2, 0])), outside(np.arange(3.0)),
+      float(band_matvec(np.array([[2.0, 2.0], [1.0, 0.0]]), np.ones((2, 1))).sum()))
+"""
+
+
+def test_cached_kernels_load_without_the_registries_and_later_compiles_still_work(tmp_path):
+    """The loads skip numba's context refresh; a compile after them (here numba's np.sum, which
+    needs numba.np.arraymath's registry) refreshes itself. Run twice on one cache: the first
+    process compiles and caches, the second loads."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    env = {k: v for k, v in os.environ.items() if k != "SNAPMEM_COLD"}
+    env.update(NUMBA_CACHE_DIR=str(tmp_path), SNAPMEM_COLD="compile", SNAPMEM_BACKGROUND_COMPILE="0",
+               PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    runs = [subprocess.run([sys.executable, "-c", LOAD_THEN_COMPILE], capture_output=True, text=True, env=env)
+            for _ in range(2)]
+    for run in runs:
+        assert run.returncode == 0, run.stderr[-2000:]
+    first, second = (run.stdout.rsplit("@", 1)[1].split() for run in runs)
+    assert first[0] == "False" and second[0] == "True"          # compiled (registries) / loaded (none)
+    assert first[1:] == second[1:]                                  # the loaded kernel's numbers are the compiled
+    assert first[1] == "0" and abs(float(first[2]) - 56.0 / 15.0) < 1e-14   # d_2 = 4 - 1/3.75 = 56/15
+    assert first[3:] == ["6.0", "6.0"]
