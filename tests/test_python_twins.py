@@ -14,6 +14,9 @@ def compiled(kernel):
     return getattr(kernel, "dispatcher", kernel)
 
 
+from snapmem.solvers import rules  # noqa: E402
+
+MAX_ABS = rules.max_abs                  # the Kernel (its module name is rebound once it compiles)
 KERNELS = {name: getattr(linalg, name) for name in
            ("band_ldlt", "band_ldlt_solve", "_ldlt_solve_vector", "orthonormal", "ritz_step", "band_matvec")}
 
@@ -99,3 +102,11 @@ def test_every_twin_keeps_the_kernels_name_and_is_not_what_numba_compiles(name):
     kernel = KERNELS[name]
     assert kernel._twin is not None and kernel._twin is not kernel.py_func
     assert kernel.__name__ == name
+
+
+@pytest.mark.parametrize("values", [[], [-0.0], [0.0, -3.0, 2.0], [1.0, np.nan, 5.0], [np.inf, -np.inf], [-1e-300, 2e-308]])
+def test_max_abs_is_numpys_max_of_abs_compiled_and_as_python(values):
+    x = np.array(values, dtype=float)
+    expected = float(np.max(np.abs(x))) if x.size else 0.0
+    for f in (compiled(MAX_ABS), MAX_ABS._twin, MAX_ABS.py_func, rules.max_norm):
+        assert same(f(x), expected)

@@ -34,15 +34,35 @@ RULES = NewtonRules(ARMIJO, CUT, STALL_FACTOR, STALL_STEP, RESIDUAL_FALL, INERTI
 
 
 @njit(cache=True, nogil=True)
+def max_abs(x):
+    """max |x_i| of a 1D array: 0 if empty, NaN if x has one (as ``np.max(np.abs(x))``, which is
+    its Python twin). A loop, because numba's ``np.max`` compiles its generic reduction (0.3 s of
+    the compiled step's first compilation); a maximum is exact, so the value is the same."""
+    largest = 0.0
+    for i in range(x.size):
+        a = abs(x[i])
+        if a != a:
+            return a
+        if a > largest:
+            largest = a
+    return largest
+
+
+@max_abs.python_twin
+def _max_abs_numpy(x):
+    return float(np.max(np.abs(x))) if x.size else 0.0
+
+
+@njit(cache=True, nogil=True)
 def max_norm(r):
     """max |r_i| (0 for an empty r; NaN if r has one): the residual norm both solves converge in."""
-    return np.max(np.abs(r)) if r.size else 0.0
+    return max_abs(r)
 
 
 @njit(cache=True, nogil=True)
 def step_length(alpha, dx):
     """max |alpha dx_i| of an accepted step (0 for an empty dx): what :func:`converged` compares with |q|."""
-    return alpha * np.max(np.abs(dx)) if dx.size else 0.0
+    return alpha * max_abs(dx)
 
 
 @njit(cache=True, nogil=True)
@@ -52,7 +72,7 @@ def converged(norm, tol, floor, last_step, q):
     rounding of q (a stiff state near a law's lock; a slowly converging singular problem takes
     steps far larger than that)."""
     floor_tol = max(tol, floor)
-    return norm <= floor_tol or (norm <= STALL_FACTOR * floor_tol and last_step <= STALL_STEP * np.max(np.abs(q)))
+    return norm <= floor_tol or (norm <= STALL_FACTOR * floor_tol and last_step <= STALL_STEP * max_abs(q))
 
 
 @njit(cache=True, nogil=True)
