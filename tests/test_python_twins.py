@@ -110,3 +110,45 @@ def test_max_abs_is_numpys_max_of_abs_compiled_and_as_python(values):
     expected = float(np.max(np.abs(x))) if x.size else 0.0
     for f in (compiled(MAX_ABS), MAX_ABS._twin, MAX_ABS.py_func, rules.max_norm):
         assert same(f(x), expected)
+
+
+from snapmem.kernels import assembly  # noqa: E402
+
+ASSEMBLY = {name: getattr(assembly, name) for name in
+            ("edge_assembly", "linear_law_density", "volume_gradient", "state_check")}
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 30), st.integers(0, 2 ** 32 - 1), st.sampled_from([0.0, 0.37]), st.sampled_from([1, 2]))
+def test_assembly_twins_are_the_compiled_kernels_bit_for_bit(n_edges, seed, pressure, order):
+    """The edge assembly (gradient, band, volume, largest force), the linear law, the volume
+    gradient: the edge arithmetic on arrays and the scatter by np.add.at, against the loops."""
+    rng = np.random.default_rng(seed)
+    n = n_edges + 1
+    q = np.abs(rng.normal(size=2 * n)) + 0.5
+    edges = np.stack([np.arange(n_edges), np.arange(1, n_edges + 1)], axis=1).astype(np.int64)
+    inv_length, inv_mid_radius, weight = (np.abs(rng.normal(size=n_edges)) + 0.1 for _ in range(3))
+    derivatives = [rng.normal(size=n_edges) for _ in range(5)]
+    n_band = 7 * n
+    band_index = rng.integers(0, n_band + 1, size=16 * n_edges).astype(np.int64)   # repeats accumulate
+    args = (q, edges, inv_length, inv_mid_radius, weight, *derivatives, pressure, band_index, n_band, order)
+    kernel = ASSEMBLY["edge_assembly"]
+    for got, expected in zip(kernel._twin(*args), compiled(kernel)(*args)):
+        assert same(got, expected)
+    lam1, lam2 = np.abs(rng.normal(size=(2, n_edges))) + 0.3
+    law = ASSEMBLY["linear_law_density"]
+    for got, expected in zip(law._twin(lam1, lam2, 0.4375, 0.0625), compiled(law)(lam1, lam2, 0.4375, 0.0625)):
+        assert same(got, expected) and got.shape == (n_edges,)
+    gradient = ASSEMBLY["volume_gradient"]
+    assert same(gradient._twin(q, edges, q.size), compiled(gradient)(q, edges, q.size))
+
+
+@pytest.mark.parametrize("bad, expected", [(None, -1), ((2, -1.0), 2), ((4, 0.0), 4), ((1, np.nan), -2),
+                                           ((3, np.inf), -2)])
+def test_state_check_twin_finds_what_the_kernel_finds(bad, expected):
+    q = np.arange(1.0, 9.0)
+    if bad is not None:
+        q[bad[0]] = bad[1]
+    radius_dofs = np.arange(0, 8, 2, dtype=np.int64)
+    kernel = ASSEMBLY["state_check"]
+    assert kernel._twin(q, radius_dofs) == compiled(kernel)(q, radius_dofs) == expected

@@ -87,6 +87,50 @@ def invariant_chain(lam1, lam2, W1, W2, W11, W12, W22):
     return w1, w2, w11, w12, w22
 
 
+@njit(cache=True, nogil=True, inline="always")
+def edge_terms(ra, za, rb, zb, inv_length, inv_mid_radius, wt, w1, w2, w11, w12, w22, pressure, hessian):
+    """One edge's part of :func:`edge_assembly`: its swept volume, its gradient entries (r_a, z_a,
+    r_b, z_b) and, if ``hessian``, the nine distinct entries of its 4 x 4 Hessian (else zeros):
+    (V_e, g0, g1, g2, g3, H00, H22, H02, H11, H13, H01, H23, H03, H12).
+
+    Scalars in the compiled loop; arrays of all edges in its Python twin (the same operations
+    elementwise, so the same numbers).
+    """
+    dr, dz = rb - ra, zb - za
+    l = np.sqrt(dr * dr + dz * dz)
+    inv_l = 1.0 / l
+    u = dr * inv_l * inv_length
+    v = dz * inv_l * inv_length
+    h = 0.5 * inv_mid_radius
+    a1, a2 = wt * w1, wt * w2
+    swept, c, sp, ga, gb = swept_volume(ra, rb, dz, -pressure)
+    g0, g1, g2, g3 = a2 * h - a1 * u + ga * dz, -a1 * v - sp, a2 * h + a1 * u + gb * dz, a1 * v + sp
+    if not hessian:
+        return swept, g0, g1, g2, g3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    aa = wt * w11
+    bb = wt * w12 * h
+    cc = wt * w22 * h * h
+    d = a1 * inv_l * inv_l * inv_length * inv_l
+    A_rr, A_rz, A_zz = d * dz * dz, -d * dr * dz, d * dr * dr
+    uu, uv, vv = aa * u * u, aa * u * v, aa * v * v
+    bu, bv = bb * u, bb * v
+    return (swept, g0, g1, g2, g3,
+            uu - 2.0 * bu + cc + A_rr + 2.0 * c * dz,          # (0, 0)
+            uu + 2.0 * bu + cc + A_rr + 2.0 * c * dz,          # (2, 2)
+            cc - uu - A_rr + c * dz,                           # (0, 2)
+            vv + A_zz,                                         # (1, 1), (3, 3)
+            -vv - A_zz,                                        # (1, 3)
+            uv - bv + A_rz - ga,                               # (0, 1)
+            uv + bv + A_rz + gb,                               # (2, 3)
+            bv - uv - A_rz + ga,                               # (0, 3)
+            -uv - bv - A_rz - gb)                              # (1, 2)
+
+
+#: Where each of the 16 entries of an edge's Hessian (row-major over r_a, z_a, r_b, z_b) is among
+#: :func:`edge_terms`'s nine distinct ones (0 = H00, ..., 8 = H12).
+HESSIAN_SLOTS = (0, 5, 2, 7, 5, 3, 8, 4, 2, 8, 1, 6, 7, 4, 6, 3)
+
+
 @njit(cache=True, nogil=True)
 def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12, w22, pressure,
                   band_index, n_band_entries, order):
@@ -94,7 +138,7 @@ def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12
 
     The same arithmetic as ``snapmem.model.scene._chain_rule`` and ``PressureWork.volume_local`` (which
     document it and are the reference the tests compare with), fused with the scatter: one pass
-    over the edges and no E x 16 temporaries.
+    over the edges and no E x 16 temporaries (the edge's arithmetic: :func:`edge_terms`).
 
     Parameters
     ----------
@@ -113,21 +157,14 @@ def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12
     band = np.zeros(n_band_entries + 1 if order >= 2 else 1)
     volume = 0.0
     force = 0.0                       # largest edge force entry (for the rounding floor)
-    H = np.empty(16)
+    distinct = np.empty(9)
     for e in range(n_edges):
         a, b = edges[e, 0], edges[e, 1]
-        ra, za, rb, zb = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
-        dr, dz = rb - ra, zb - za
-        l = np.sqrt(dr * dr + dz * dz)
-        inv_l = 1.0 / l
-        u = dr * inv_l * inv_length[e]
-        v = dz * inv_l * inv_length[e]
-        h = 0.5 * inv_mid_radius[e]
-        wt = weight[e]
-        a1, a2 = wt * w1[e], wt * w2[e]
-        swept, c, sp, ga, gb = swept_volume(ra, rb, dz, -pressure)
+        (swept, g0, g1, g2, g3, distinct[0], distinct[1], distinct[2], distinct[3], distinct[4], distinct[5],
+         distinct[6], distinct[7], distinct[8]) = edge_terms(q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1],
+                                                             inv_length[e], inv_mid_radius[e], weight[e], w1[e], w2[e],
+                                                             w11[e], w12[e], w22[e], pressure, order >= 2)
         volume += swept
-        g0, g1, g2, g3 = a2 * h - a1 * u + ga * dz, -a1 * v - sp, a2 * h + a1 * u + gb * dz, a1 * v + sp
         gradient[2 * a] += g0
         gradient[2 * a + 1] += g1
         gradient[2 * b] += g2
@@ -135,25 +172,48 @@ def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12
         force = max(force, abs(g0), abs(g1), abs(g2), abs(g3))
         if order < 2:
             continue
-        aa = wt * w11[e]
-        bb = wt * w12[e] * h
-        cc = wt * w22[e] * h * h
-        d = a1 * inv_l * inv_l * inv_length[e] * inv_l
-        A_rr, A_rz, A_zz = d * dz * dz, -d * dr * dz, d * dr * dr
-        uu, uv, vv = aa * u * u, aa * u * v, aa * v * v
-        bu, bv = bb * u, bb * v
-        H[0] = uu - 2.0 * bu + cc + A_rr + 2.0 * c * dz          # (0, 0)
-        H[10] = uu + 2.0 * bu + cc + A_rr + 2.0 * c * dz         # (2, 2)
-        H[2] = H[8] = cc - uu - A_rr + c * dz                    # (0, 2)
-        H[5] = H[15] = vv + A_zz                                 # (1, 1), (3, 3)
-        H[7] = H[13] = -vv - A_zz                                # (1, 3)
-        H[1] = H[4] = uv - bv + A_rz - ga                        # (0, 1)
-        H[11] = H[14] = uv + bv + A_rz + gb                      # (2, 3)
-        H[3] = H[12] = bv - uv - A_rz + ga                       # (0, 3)
-        H[6] = H[9] = -uv - bv - A_rz - gb                       # (1, 2)
         for k in range(16):
-            band[band_index[k * n_edges + e]] += H[k]
+            band[band_index[k * n_edges + e]] += distinct[HESSIAN_SLOTS[k]]
     return gradient, band, volume, force
+
+
+def _sum_in_order(values):
+    """0.0 + values[0] + values[1] + ... added in sequence, as a compiled loop's ``total += v``
+    (``np.add.accumulate`` adds strictly in order; ``np.sum`` pairwise)."""
+    return 0.0 + np.add.accumulate(values)[-1] if values.size else 0.0
+
+
+@edge_assembly.python_twin
+def _edge_assembly_python(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12, w22, pressure,
+                          band_index, n_band_entries, order):
+    """:func:`edge_assembly` on all edges at once: :func:`edge_terms` on arrays, and the scatter by
+    ``np.add.at``, which adds in the order of its indices (the loop's order)."""
+    n_edges = edges.shape[0]
+    a, b = edges[:, 0], edges[:, 1]
+    with np.errstate(all="ignore"):
+        swept, g0, g1, g2, g3, *distinct = edge_terms.py_func(q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1],
+                                                              inv_length, inv_mid_radius, weight, w1, w2, w11, w12,
+                                                              w22, pressure, order >= 2)
+    gradient = np.zeros(q.size)
+    np.add.at(gradient, np.stack([2 * a, 2 * a + 1, 2 * b, 2 * b + 1], axis=1).ravel(),
+              np.stack([g0, g1, g2, g3], axis=1).ravel())
+    force = float(np.fmax.reduce(np.abs(np.stack([g0, g1, g2, g3])).ravel(), initial=0.0))
+    band = np.zeros(n_band_entries + 1 if order >= 2 else 1)
+    if order >= 2 and n_edges:
+        entries = np.stack([np.broadcast_to(distinct[k], (n_edges,)) for k in HESSIAN_SLOTS], axis=1)
+        np.add.at(band, band_index[:16 * n_edges].reshape(16, n_edges).T.ravel(), entries.ravel())
+    return gradient, band, _sum_in_order(np.broadcast_to(swept, (n_edges,))), force
+
+
+@njit(cache=True, nogil=True, inline="always")
+def linear_law_terms(l1, l2, W1, W2):
+    """W = W1 (I1 - 3) + W2 (I2 - 3) and its derivatives in (lam1, lam2) at one edge (or elementwise
+    on arrays): (w, w1, w2, w11, w12, w22)."""
+    a2, b2 = l1 * l1, l2 * l2
+    w = W1 * (a2 + b2 + 1.0 / (a2 * b2) - 3.0) + W2 * (1.0 / a2 + 1.0 / b2 + a2 * b2 - 3.0)
+    i1_1, i1_2, i1_11, i1_12, i1_22, i2_1, i2_2, i2_11, i2_12, i2_22 = _invariant_derivatives(l1, l2)
+    return (w, W1 * i1_1 + W2 * i2_1, W1 * i1_2 + W2 * i2_2, W1 * i1_11 + W2 * i2_11, W1 * i1_12 + W2 * i2_12,
+            W1 * i1_22 + W2 * i2_22)
 
 
 @njit(cache=True, nogil=True)
@@ -162,22 +222,20 @@ def linear_law_density(lam1, lam2, W1, W2):
     derivatives in (lam1, lam2), in one pass: returns (w, w1, w2, w11, w12, w22), each (E,).
 
     :func:`invariant_chain` with its second invariant derivatives zero (no temporaries: a time
-    step assembles this ~7 times).
+    step assembles this ~7 times); the edge's arithmetic is :func:`linear_law_terms`.
     """
     n = lam1.size
     w, w1, w2 = np.empty(n), np.empty(n), np.empty(n)
     w11, w12, w22 = np.empty(n), np.empty(n), np.empty(n)
     for e in range(n):
-        l1, l2 = lam1[e], lam2[e]
-        a2, b2 = l1 * l1, l2 * l2
-        w[e] = W1 * (a2 + b2 + 1.0 / (a2 * b2) - 3.0) + W2 * (1.0 / a2 + 1.0 / b2 + a2 * b2 - 3.0)
-        i1_1, i1_2, i1_11, i1_12, i1_22, i2_1, i2_2, i2_11, i2_12, i2_22 = _invariant_derivatives(l1, l2)
-        w1[e] = W1 * i1_1 + W2 * i2_1
-        w2[e] = W1 * i1_2 + W2 * i2_2
-        w11[e] = W1 * i1_11 + W2 * i2_11
-        w12[e] = W1 * i1_12 + W2 * i2_12
-        w22[e] = W1 * i1_22 + W2 * i2_22
+        w[e], w1[e], w2[e], w11[e], w12[e], w22[e] = linear_law_terms(lam1[e], lam2[e], W1, W2)
     return w, w1, w2, w11, w12, w22
+
+
+@linear_law_density.python_twin
+def _linear_law_density_python(lam1, lam2, W1, W2):
+    with np.errstate(all="ignore"):
+        return tuple(np.broadcast_to(x, lam1.shape).copy() for x in linear_law_terms.py_func(lam1, lam2, W1, W2))
 
 
 @njit(cache=True, nogil=True)
@@ -254,6 +312,26 @@ def volume_gradient(q, edges, n_dof):
         g[2 * b] += gb * dz
         g[2 * b + 1] += s
     return g
+
+
+@volume_gradient.python_twin
+def _volume_gradient_python(q, edges, n_dof):
+    a, b = edges[:, 0], edges[:, 1]
+    ra, za, rb, zb = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
+    dz = zb - za
+    _, _, s, ga, gb = swept_volume.py_func(ra, rb, dz, 1.0)
+    g = np.zeros(n_dof)
+    np.add.at(g, np.stack([2 * a, 2 * a + 1, 2 * b, 2 * b + 1], axis=1).ravel(),
+              np.stack([ga * dz, -s, gb * dz, s], axis=1).ravel())          # g -= s is g += (-s), exactly
+    return g
+
+
+@state_check.python_twin
+def _state_check_python(q, radius_dofs):
+    if not np.isfinite(q).all():
+        return -2
+    bad = q[radius_dofs] <= 0.0
+    return radius_dofs[np.argmax(bad)] if bad.any() else -1
 
 
 @njit(cache=True, nogil=True)
