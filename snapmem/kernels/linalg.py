@@ -143,12 +143,12 @@ def band_ldlt_solve(F: np.ndarray, x: np.ndarray):
 
 @band_ldlt_solve.python_twin
 def _band_ldlt_solve_python(F, x):
-    """:func:`band_ldlt_solve` on Python floats (the kernel's operations, in its order)."""
+    """:func:`band_ldlt_solve` on Python floats, a row of right-hand sides at a time (each entry
+    gets the kernel's operations, in its order)."""
     if x.shape[1] == 1:
         _ldlt_solve_vector(F, x[:, 0])
         return x
     n, b = F.shape[0], F.shape[1] - 1
-    cols = range(x.shape[1])
     factors = F.tolist()
     rows = x.tolist()
     for j in range(n):
@@ -156,18 +156,15 @@ def _band_ldlt_solve_python(F, x):
         Fj = factors[j]
         for m in range(1, min(b, n - 1 - j) + 1):
             l = Fj[m]
-            target = rows[j + m]
-            for c in cols:
-                target[c] -= l * row[c]
+            rows[j + m] = [t - l * r for t, r in zip(rows[j + m], row)]
     for j in range(n - 1, -1, -1):
         Fj = factors[j]
         inv = 1.0 / Fj[0]
-        row = rows[j]
-        for c in cols:
-            s = row[c] * inv
-            for m in range(1, min(b, n - 1 - j) + 1):
-                s -= Fj[m] * rows[j + m][c]
-            row[c] = s
+        s = [r * inv for r in rows[j]]
+        for m in range(1, min(b, n - 1 - j) + 1):
+            l = Fj[m]
+            s = [t - l * r for t, r in zip(s, rows[j + m])]
+        rows[j] = s
     x[:] = rows
     return x
 
