@@ -15,12 +15,15 @@ from snapmem.reference.exact import balloon_extrema, balloon_pressure
 from snapmem.reference.two_balloons import asymmetric_fold, balloon_volume, pair_stable, symmetric_bifurcations
 
 
-def _pair(nodes):
-    """The symmetric branch through both BPs and the asymmetric half from the first BP to its fold."""
+def _pair(nodes, target_iterations=None):
+    """The symmetric branch through both BPs and the asymmetric half from the first BP to its fold
+    (corrector iterations aimed at: the scene's default, 5, unless given)."""
     scene = build_scene("two_balloons", nodes=nodes)
-    branch = trace(scene, "volume", until={"stretch_max": 2.8})
+    branch = trace(scene, "volume", until={"stretch_max": 2.8},
+                   options=ContinuationOptions(target_iterations=target_iterations))
     (_, child), *_ = switch_at(scene, "volume", branch.critical_state(0),
-                               options=ContinuationOptions(stop_at_first_limit=True, max_steps=200))
+                               options=ContinuationOptions(stop_at_first_limit=True, max_steps=200,
+                                                           target_iterations=target_iterations))
     return branch, child
 
 
@@ -346,17 +349,25 @@ def test_identical_membranes_in_the_same_state_are_evaluated_once_with_the_same_
 
 
 def test_fast_options_locate_the_default_traces_points(pairs):
-    """The must-show run's options (studies/two_balloons.py FAST: 5 corrector iterations aimed at,
-    not 3) take half the points and find the same BPs, fold and stability: the located points
-    agree with the default trace's to 1e-11 relative at N = 101."""
+    """The scene's default options (``two_balloons``' continuation_defaults: 5 corrector iterations
+    aimed at, not the generic 3; the must-show run, studies/two_balloons.py timed_pair) take half
+    the points and find the same BPs, fold and stability: the located points agree with the
+    trace aiming at 3 to 1e-11 relative at N = 101."""
     import importlib.util
     from pathlib import Path
+    from snapmem.continuation.options import TARGET_ITERATIONS, resolved_target_iterations
     path = Path(__file__).resolve().parents[1] / "studies" / "two_balloons.py"
     spec = importlib.util.spec_from_file_location("two_balloons_study", path)
     study = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(study)
-    branch, child = pairs[101]
+    scene = build_scene("two_balloons", nodes=21)
+    assert resolved_target_iterations(ContinuationOptions(), scene) == 5
+    assert resolved_target_iterations(ContinuationOptions(target_iterations=3), scene) == 3
+    assert resolved_target_iterations(ContinuationOptions(), build_scene("balloon", nodes=21)) == TARGET_ITERATIONS
+    branch, child = _pair(101, target_iterations=TARGET_ITERATIONS)
     fast, fast_child = study.timed_pair(101)
+    default, default_child = pairs[101]
+    assert len(default.table) == len(fast.table) and len(default_child.table) == len(fast_child.table)
     assert len(fast.table) + len(fast_child.table) < 0.6 * (len(branch.table) + len(child.table))
     assert list(fast.points["kind"]) == list(branch.points["kind"]) == ["BP", "BP"]
     # a pitchfork by the exchange symmetry: a = c = 0 to rounding at either BP location (the null

@@ -28,8 +28,10 @@ class ContinuationOptions:
         Corrector tolerance on max |R| relative to the scene's force scale, default 1e-10.
     max_corrector_iterations : int
         Default 8; more means the step is cut.
-    target_iterations : int
-        Corrector iterations aimed at; fewer grow the step, more shrink it. Default 3.
+    target_iterations : int or None
+        Corrector iterations aimed at; fewer grow the step, more shrink it. Default None: the
+        scene's own (its ``continuation_defaults``, listed by ``snapmem scenes``), else
+        :data:`TARGET_ITERATIONS` (3); :func:`resolved_target_iterations`.
     max_angle : float
         Largest angle between consecutive tangents [rad] before a step is cut, default 0.3.
     n_eigs : int
@@ -53,7 +55,7 @@ class ContinuationOptions:
     max_steps: int = 2000
     newton_tol: float = 1e-10
     max_corrector_iterations: int = 8
-    target_iterations: int = 3
+    target_iterations: int | None = None
     max_angle: float = 0.3
     n_eigs: int = 2
     stability: bool = True
@@ -69,12 +71,28 @@ class ContinuationOptions:
         check_int("max_steps", self.max_steps, minimum=1)
         check_real("newton_tol", self.newton_tol, minimum=0.0, min_inclusive=False)
         check_int("max_corrector_iterations", self.max_corrector_iterations, minimum=1)
-        check_int("target_iterations", self.target_iterations, minimum=1)
+        if self.target_iterations is not None:
+            check_int("target_iterations", self.target_iterations, minimum=1)
         check_real("max_angle", self.max_angle, minimum=0.0, min_inclusive=False, maximum=math.pi)
         check_int("n_eigs", self.n_eigs, minimum=1)
         if self.direction not in (1, -1):
             raise SnapmemError(f"direction = {self.direction!r}: must be +1 or -1")
         object.__setattr__(self, "save_at", tuple(check_real("save_at", v) for v in self.save_at))
+
+
+#: Corrector iterations aimed at where neither the options nor the scene say otherwise.
+TARGET_ITERATIONS = 3
+
+
+def resolved_target_iterations(options: ContinuationOptions, scene) -> int:
+    """The corrector iterations a trace of ``scene`` aims at: ``options.target_iterations`` if set,
+    else the scene's ``continuation_defaults["target_iterations"]`` if it has one (a scene whose
+    located points are proven not to depend on it, e.g. ``two_balloons``), else
+    :data:`TARGET_ITERATIONS`."""
+    if options.target_iterations is not None:
+        return options.target_iterations
+    defaults = getattr(scene, "__dict__", {}).get("continuation_defaults") or {}
+    return int(defaults.get("target_iterations", TARGET_ITERATIONS))
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.continuation.branch import Branch, Outcome, Point, PointKind
 from snapmem.continuation.events import Event, Step, events_from
-from snapmem.continuation.options import ContinuationOptions
+from snapmem.continuation.options import ContinuationOptions, resolved_target_iterations
 from snapmem.continuation.problems import LoadProblem, make_problem
 from snapmem.errors import SnapmemError, SolverError
 from snapmem.kernels.banded import BorderedMatrix, scale_of
@@ -220,6 +220,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     rejections = []
     critical = []
     ds = options.ds
+    target_iterations = resolved_target_iterations(options, scene)
     status, outcome = f"max_steps ({options.max_steps}) reached", Outcome.MAX_STEPS
     for step in range(options.max_steps):
         base = points[-1]
@@ -260,7 +261,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
             status, outcome = stop.status, stop.outcome
             break
         # adapt the step from the corrector's effort
-        factor = (options.target_iterations / max(p.iterations, 1)) ** 0.5
+        factor = (target_iterations / max(p.iterations, 1)) ** 0.5
         ds = min(options.ds_max, max(options.ds_min, ds * min(2.0, max(0.5, factor))))
     return _assemble(scene, control, pb, points, critical, rejections, status, outcome, tracer)
 

@@ -57,13 +57,18 @@ class MultiScene:
     name : str
     parameters : mapping, optional
         Recorded beside results.
+    continuation_defaults : mapping, optional
+        Continuation options this scene takes where the caller leaves them unset (None), e.g.
+        ``{"target_iterations": 5}`` (:func:`snapmem.continuation.options.resolved_target_iterations`);
+        an option the caller sets overrides it.
     """
 
     start_guess = None
 
     def __init__(self, membranes: Sequence[Scene], chambers: Sequence[Chamber], name: str = "multi",
-                 parameters: Mapping | None = None):
+                 parameters: Mapping | None = None, continuation_defaults: Mapping | None = None):
         self.membranes = tuple(membranes)
+        self.continuation_defaults = dict(continuation_defaults or {})
         self.chambers = tuple(chambers)
         if not self.membranes:
             raise SnapmemError("membranes: a multi-membrane scene needs at least one membrane")
