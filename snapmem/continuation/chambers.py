@@ -218,6 +218,23 @@ class ChamberProblem(LoadProblem):
     def stiffness(self, J):
         return J
 
+    def arclength_factor(self, J, Fl, row, corner, lu=None):
+        """The factorisation of the tracer's arclength system [[J, Fl], [row^T, corner]] as the band
+        K bordered once by k + 1 columns (the chambers' -G and Fl's state part) and rows (-G and the
+        tangent's state part), the (k + 1) x (k + 1) corner holding -D, Fl's pressure part, the
+        tangent's and ``corner``: the same matrix, one block elimination with one refinement on
+        its exact product instead of J's elimination nested in the border's (three band solves a
+        solve instead of five, and a third of the small dense operations). ``lu``: J's
+        factorisation (:meth:`factorise`), whose band factorisation is reused."""
+        n, k = J.A.n, J.D.shape[0]
+        B = np.empty((n, k + 1))
+        B[:, :k], B[:, k] = J.B, Fl[:n]
+        C = np.empty((n, k + 1))
+        C[:, :k], C[:, k] = J.C, row[:n]
+        D = np.empty((k + 1, k + 1))
+        D[:k, :k], D[:k, k], D[k, :k], D[k, k] = J.D, Fl[n:], row[n:], corner[0][0]
+        return BorderedMatrix(J.A, B, C, D).factor(None if lu is None else lu.inner)
+
     def null_mode_borders(self, x, lam, J) -> list:
         return [self.dF_dlam(x, lam)]
 

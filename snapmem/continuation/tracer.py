@@ -64,6 +64,15 @@ class Tracer:
         """The arclength inner product of two (x, lambda) vectors (scaled, dimensionless)."""
         return float(a[:-1] @ (self.wx * b[:-1]) + self.wl * a[-1] * b[-1])
 
+    def arclength_factor(self, J, Fl, row, corner, lu=None):
+        """The factorisation of the arclength system [[J, Fl], [row^T, corner]]: the problem's own
+        (its ``arclength_factor``, e.g. a chamber problem's single bordering of the band) if it
+        has one, else J bordered (``lu``: J's factorisation, reused)."""
+        own = getattr(self.pb, "arclength_factor", None)
+        if own is not None:
+            return own(J, Fl, row, corner, lu)
+        return BorderedMatrix(J, Fl, row, corner).factor(lu)
+
     def tangent(self, x, lam, J, previous: np.ndarray | None, lu=None):
         """Unit tangent at (x, lam), oriented along ``previous`` (or the chosen direction);
         ``lu``: J's factorisation if already made."""
@@ -72,8 +81,7 @@ class Tracer:
             row, corner = np.zeros(x.size), [[1.0]]
         else:
             row, corner = self.wx * previous[:-1], [[self.wl * previous[-1]]]
-        M = BorderedMatrix(J, Fl, row, corner)
-        lu = M.factor(lu)
+        lu = self.arclength_factor(J, Fl, row, corner, lu)
         if lu.singular:
             raise SolverError("singular extended Jacobian: cannot compute the tangent")
         rhs = np.zeros(x.size + 1)
@@ -109,8 +117,7 @@ class Tracer:
                 return Point(x, lam, iterations=it), J
             if it == self.opt.max_corrector_iterations:
                 return None, f"corrector did not converge in {it} iterations (|R| = {norm:.2e})"
-            M = BorderedMatrix(J, self.pb.dF_dlam(x, lam), row, corner)
-            lu = M.factor()
+            lu = self.arclength_factor(J, self.pb.dF_dlam(x, lam), row, corner)
             if lu.singular:
                 return None, "singular extended Jacobian"
             d = lu.solve(-np.append(F, g))
