@@ -388,3 +388,17 @@ def test_fast_options_locate_the_default_traces_points(pairs):
     away = fast_child.table[np.abs(fast_child.table["s"] - fold_s) > 0.1]
     assert len(away) > 5 and list(away["stable"]) == [pair_stable(a, b) for a, b in zip(away["stretch_1"],
                                                                                       away["stretch_2"])]
+
+
+def test_bps_located_to_the_eigenvalues_rounding_are_brents_to_its_xtol(pairs, monkeypatch):
+    """Locating a BP stops where the crossing eigenvalue is within rounding of |J|
+    (ChamberProblem.crossing_rounding) instead of bisecting noise to Brent's xtol: the same BPs to
+    1e-11 relative (control, pressure, each balloon's stretch), with fewer corrector evaluations."""
+    from snapmem.continuation.chambers import ChamberProblem
+    branch, _ = pairs[51]
+    monkeypatch.setattr(ChamberProblem, "crossing_rounding", 0.0)
+    to_xtol = trace(build_scene("two_balloons", nodes=51), "volume", until={"stretch_max": 2.8})
+    assert list(to_xtol.points["kind"]) == list(branch.points["kind"]) == ["BP", "BP"]
+    for column in ("control", "pressure", "stretch_1", "stretch_2"):
+        assert np.allclose(branch.points[column], to_xtol.points[column], rtol=1e-11, atol=0), column
+    assert branch.stats["evaluations"] < to_xtol.stats["evaluations"]

@@ -75,6 +75,10 @@ class ChamberProblem(LoadProblem):
     the fluid and gas chambers), parameter ``control`` (see the module docstring)."""
 
     jacobian_is_stiffness = True        # J is singular exactly where the energy's Hessian is
+    #: A crossing eigenvalue of J within this fraction of |J| (its largest diagonal entry) is at its
+    #: zero to rounding: locating a BP stops there (snapmem.continuation.locate._crossing_ftol). The
+    #: BPs move by less than 1e-12 relative against searching to Brent's xtol alone (tests/test_chambers.py).
+    crossing_rounding = float(np.finfo(float).eps)
 
     def __init__(self, scene: MultiScene, control: str):
         self.scene, self.control = scene, control
