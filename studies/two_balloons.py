@@ -54,13 +54,14 @@ def pair_branches(nodes: int, R2: float = 10.0) -> dict:
     return out
 
 
-#: The generic options, for comparison: the corrector aims at 3 Newton iterations (the default of
-#: a scene without continuation defaults). ``two_balloons`` aims at 5 by default (its
-#: ``continuation_defaults``, snapmem.catalog.chambers), so the step grows on the smooth stretches
-#: between critical points (about half as many points). The points located on the way (BPs, fold,
+#: The generic options, for comparison: the corrector aims at 3 Newton iterations and runs a
+#: diverging corrector to its iteration limit (the defaults of a scene without continuation
+#: defaults). ``two_balloons`` aims at 5 by default (its ``continuation_defaults``,
+#: snapmem.catalog.chambers), so the step grows on the smooth stretches between critical points
+#: (about half as many points), and cuts a step as soon as its corrector diverges. The points located on the way (BPs, fold,
 #: the end) do not depend on the steps: they are the generic trace's to 1e-11 relative
 #: (tests/test_chambers.py).
-GENERIC = ContinuationOptions(target_iterations=3)
+GENERIC = ContinuationOptions(target_iterations=3, abandon_diverging=False)
 
 
 def timed_pair(nodes: int = 101, options: ContinuationOptions = ContinuationOptions()) -> tuple:

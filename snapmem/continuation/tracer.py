@@ -33,7 +33,7 @@ pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.continuation.branch import Branch, Outcome, Point, PointKind
 from snapmem.continuation.events import Event, Step, events_from
-from snapmem.continuation.options import ContinuationOptions, resolved_target_iterations
+from snapmem.continuation.options import ContinuationOptions, resolve_options
 from snapmem.continuation.problems import LoadProblem, make_problem
 from snapmem.errors import SnapmemError, SolverError
 from snapmem.kernels.banded import BorderedMatrix, scale_of
@@ -54,6 +54,7 @@ class Tracer:
     inner product and the work counters (Newton iterations, evaluations)."""
 
     def __init__(self, problem, options: ContinuationOptions, scene: Scene):
+        options = resolve_options(options, scene)          # the scene's own defaults where unset
         self.pb, self.opt, self.scene = problem, options, scene
         self.tol = options.newton_tol * scene.force_scale
         self.wx, self.wl = problem.x_weight, 1.0 / problem.lam_scale ** 2
@@ -99,6 +100,7 @@ class Tracer:
         x, lam = (base.x + s * t[:-1], base.lam + s * t[-1]) if guess is None else guess
         row, corner = self.wx * t[:-1], [[self.wl * t[-1]]]
         last_step = np.inf
+        first_norm = None
         for it in range(self.opt.max_corrector_iterations + 1):
             why = self.pb.inadmissible(x, lam)
             if why is not None:
@@ -117,6 +119,10 @@ class Tracer:
                 return Point(x, lam, iterations=it), J
             if it == self.opt.max_corrector_iterations:
                 return None, f"corrector did not converge in {it} iterations (|R| = {norm:.2e})"
+            if first_norm is None:
+                first_norm = norm
+            elif self.opt.abandon_diverging and norm > first_norm and norm > 1e3 * tol:
+                return None, f"corrector diverging: |R| = {norm:.2e} at iteration {it}, above the predictor's {first_norm:.2e}"
             lu = self.arclength_factor(J, self.pb.dF_dlam(x, lam), row, corner)
             if lu.singular:
                 return None, "singular extended Jacobian"
@@ -214,6 +220,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     -------
     Branch
     """
+    options = resolve_options(options, scene)              # the scene's own defaults where unset
     pb = make_problem(scene, control)
     watch = events_from(options, until, scene) + list(events)
     tracer = Tracer(pb, options, scene)
@@ -227,7 +234,6 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     rejections = []
     critical = []
     ds = options.ds
-    target_iterations = resolved_target_iterations(options, scene)
     status, outcome = f"max_steps ({options.max_steps}) reached", Outcome.MAX_STEPS
     for step in range(options.max_steps):
         base = points[-1]
@@ -268,7 +274,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
             status, outcome = stop.status, stop.outcome
             break
         # adapt the step from the corrector's effort
-        factor = (target_iterations / max(p.iterations, 1)) ** 0.5
+        factor = (options.target_iterations / max(p.iterations, 1)) ** 0.5
         ds = min(options.ds_max, max(options.ds_min, ds * min(2.0, max(0.5, factor))))
     return _assemble(scene, control, pb, points, critical, rejections, status, outcome, tracer)
 
