@@ -179,11 +179,15 @@ class ChamberProblem(LoadProblem):
 
     def dF_dlam(self, x, lam):
         sc = self.scene
+        j = None if self.load is not None else self.multiplied.index(self.controlled)
+        if j is not None and sc.chambers[self.controlled].kind is ChamberKind.VOLUME:
+            d = np.zeros(self.n)              # a fluid's volume: dV*/dlam = 1, whatever the state
+            d[sc.n_free + j] = 1.0
+            return d
         q, loads = self.state(x, lam)
         if self.load is not None:
             return np.concatenate([sc.load_derivative(q, self.load, loads), np.zeros(len(self.multiplied))])
         d = np.zeros(self.n)
-        j = self.multiplied.index(self.controlled)
         _, _, dv_dlam = self.target(self.controlled, loads[sc.pressure_name(self.controlled)], lam)
         d[sc.n_free + j] = dv_dlam
         return d
