@@ -35,9 +35,10 @@ class ContinuationOptions:
     max_angle : float
         Largest angle between consecutive tangents [rad] before a step is cut, default 0.3.
     abandon_diverging : bool or None
-        Give a corrector up at the first Newton iterate whose max |R| exceeds the predictor's (and
-        1e3 times the tolerance): it is diverging, and the step is cut at once instead of after
-        ``max_corrector_iterations``.
+        Give a step's corrector up at the first Newton iterate whose max |R| exceeds the
+        predictor's (and 1e3 times the tolerance): it is diverging, and the step is cut at once
+        instead of after ``max_corrector_iterations`` (the trace's steps only: locating a point and
+        a switch's first step run their correctors to the limit).
         Default None: the scene's, else False.
     n_eigs : int
         Eigenvalues nearest zero watched at every point, default 2 (the negative count comes

@@ -93,9 +93,11 @@ class Tracer:
             t *= self.opt.direction
         return t
 
-    def correct(self, base: Point, s: float, guess: tuple | None = None):
+    def correct(self, base: Point, s: float, guess: tuple | None = None, abandon_diverging: bool = False):
         """Newton on the arclength system from the predictor base + s t (or from ``guess``, an
-        (x, lam) nearer the solution). Returns (Point, J) or (None, why)."""
+        (x, lam) nearer the solution). Returns (Point, J) or (None, why). ``abandon_diverging``:
+        give up at the first iterate whose max |R| exceeds the predictor's (the trace's steps,
+        which are cut and tried again; not where a failure is final, locating or switching)."""
         t = base.tangent
         x, lam = (base.x + s * t[:-1], base.lam + s * t[-1]) if guess is None else guess
         row, corner = self.wx * t[:-1], [[self.wl * t[-1]]]
@@ -121,7 +123,7 @@ class Tracer:
                 return None, f"corrector did not converge in {it} iterations (|R| = {norm:.2e})"
             if first_norm is None:
                 first_norm = norm
-            elif self.opt.abandon_diverging and norm > first_norm and norm > 1e3 * tol:
+            elif abandon_diverging and norm > first_norm and norm > 1e3 * tol:
                 return None, f"corrector diverging: |R| = {norm:.2e} at iteration {it}, above the predictor's {first_norm:.2e}"
             lu = self.arclength_factor(J, self.pb.dF_dlam(x, lam), row, corner)
             if lu.singular:
@@ -237,7 +239,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     status, outcome = f"max_steps ({options.max_steps}) reached", Outcome.MAX_STEPS
     for step in range(options.max_steps):
         base = points[-1]
-        p, J = tracer.correct(base, ds)
+        p, J = tracer.correct(base, ds, abandon_diverging=options.abandon_diverging)
         reason = J if p is None else None
         if p is not None:
             p.s, p.ds = base.s + ds, ds
