@@ -75,9 +75,8 @@ class ChamberProblem(LoadProblem):
     the fluid and gas chambers), parameter ``control`` (see the module docstring)."""
 
     jacobian_is_stiffness = True        # J is singular exactly where the energy's Hessian is
-    #: A crossing eigenvalue of J within this fraction of |J| (its largest diagonal entry) is at its
-    #: zero to rounding: locating a BP stops there (snapmem.continuation.locate._crossing_ftol). The
-    #: BPs move by less than 1e-12 relative against searching to Brent's xtol alone (tests/test_chambers.py).
+    #: A crossing eigenvalue of J within this fraction of |J| is at its zero to rounding: locating a
+    #: BP stops there (locate._crossing_ftol; the BPs of Brent's xtol alone to 1e-11, tests/test_chambers.py).
     crossing_rounding = float(np.finfo(float).eps)
 
     def __init__(self, scene: MultiScene, control: str):
@@ -213,10 +212,9 @@ class ChamberProblem(LoadProblem):
         """(J's n_eigs eigenvalues nearest zero, the total energy's negative count on the chambers'
         constraints (Haynsworth, module docstring), their vectors, the iterated subspace).
 
-        After :data:`ROUNDING_SWEEPS` sweeps with the eigenvalue nearest zero within
-        :data:`ROUNDING_EIGENVALUE` |J| of it (a BP, where locating lands), the iteration stops:
-        there J^-1's huge Ritz value carries rounding of eps / |eigenvalue| into the others,
-        which then never settle to the tolerance (it ran all 40 sweeps at the two-balloon BPs)."""
+        The iteration stops after :data:`ROUNDING_SWEEPS` sweeps if the eigenvalue nearest zero is
+        within :data:`ROUNDING_EIGENVALUE` |J| of it (at a BP): J^-1's huge Ritz value carries
+        eps / |eigenvalue| into the others, which never settle (all 40 sweeps ran there)."""
         if lu is None:
             lu = J.factor(J.A.factor())
         first = min(sweeps, ROUNDING_SWEEPS)
@@ -236,13 +234,10 @@ class ChamberProblem(LoadProblem):
         return J
 
     def arclength_factor(self, J, Fl, row, corner, lu=None):
-        """The factorisation of the tracer's arclength system [[J, Fl], [row^T, corner]] as the band
-        K bordered once by k + 1 columns (the chambers' -G and Fl's state part) and rows (-G and the
-        tangent's state part), the (k + 1) x (k + 1) corner holding -D, Fl's pressure part, the
-        tangent's and ``corner``: the same matrix, one block elimination with one refinement on
-        its exact product instead of J's elimination nested in the border's (three band solves a
-        solve instead of five, and a third of the small dense operations). ``lu``: J's
-        factorisation (:meth:`factorise`), whose band factorisation is reused."""
+        """The tracer's arclength system [[J, Fl], [row^T, corner]] factorised as the band K bordered
+        once by k + 1 columns and rows ([-G, Fl's and row's state parts], corner [[-D, Fl's
+        pressure part], [row's, corner]]): one block elimination refined on the exact product, not
+        J's nested in the border's (3 band solves a solve, not 5). ``lu``: J's, whose K is reused."""
         n, k = J.A.n, J.D.shape[0]
         B = np.empty((n, k + 1))
         B[:, :k], B[:, k] = J.B, Fl[:n]
