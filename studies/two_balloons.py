@@ -16,6 +16,7 @@ warm runs in-process) and writes two_balloons.speed.csv.
 """
 
 
+import os
 import statistics
 import time
 
@@ -186,7 +187,8 @@ def main(argv=None):
                                                              help="time the must-show run (N = 101) only"))
     if args.speed:
         table = speed()
-        save(args, "two_balloons.speed", table)
+        save(args, "two_balloons.speed", table, load_average_1min=round(os.getloadavg()[0], 2),
+             ratio_default_to_target_3=round(float(table["wall_s"].iloc[0] / table["wall_s"].iloc[1]), 3))
         print(table.to_string(index=False))
         return table
     sizes = [51, 101] if args.quick else [51, 101, 201]
