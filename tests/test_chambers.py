@@ -15,12 +15,13 @@ from snapmem.reference.exact import balloon_extrema, balloon_pressure
 from snapmem.reference.two_balloons import asymmetric_fold, balloon_volume, pair_stable, symmetric_bifurcations
 
 
-def _pair(nodes):
-    """The symmetric branch through both BPs and the asymmetric half from the first BP to its fold."""
+def _pair(nodes, **options):
+    """The symmetric branch through both BPs and the asymmetric half from the first BP to its fold
+    (with the scene's default continuation options, unless ``options`` are given)."""
     scene = build_scene("two_balloons", nodes=nodes)
-    branch = trace(scene, "volume", until={"stretch_max": 2.8})
+    branch = trace(scene, "volume", until={"stretch_max": 2.8}, options=ContinuationOptions(**options))
     (_, child), *_ = switch_at(scene, "volume", branch.critical_state(0),
-                               options=ContinuationOptions(stop_at_first_limit=True, max_steps=200))
+                               options=ContinuationOptions(stop_at_first_limit=True, max_steps=200, **options))
     return branch, child
 
 
@@ -346,18 +347,34 @@ def test_identical_membranes_in_the_same_state_are_evaluated_once_with_the_same_
 
 
 def test_fast_options_locate_the_default_traces_points(pairs):
-    """The must-show run's options (studies/two_balloons.py FAST: 5 corrector iterations aimed at,
-    not 3) take half the points and find the same BPs, fold and stability: the located points
-    agree with the default trace's to 1e-11 relative at N = 101."""
+    """The scene's default options (``two_balloons``' continuation_defaults: 5 corrector iterations
+    aimed at, not the generic 3, and a diverging corrector given up at once; the must-show run,
+    studies/two_balloons.py timed_pair) take half the points and fewer corrector evaluations, and
+    find the same BPs, fold and stability: the located points agree with the generic options'
+    trace to 1e-11 relative at N = 101. Options the caller sets override the scene's."""
     import importlib.util
     from pathlib import Path
+    from snapmem.continuation.options import SCENE_DEFAULTS, TARGET_ITERATIONS, resolve_options, resolved_target_iterations
     path = Path(__file__).resolve().parents[1] / "studies" / "two_balloons.py"
     spec = importlib.util.spec_from_file_location("two_balloons_study", path)
     study = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(study)
-    branch, child = pairs[101]
+    scene = build_scene("two_balloons", nodes=21)
+    assert resolved_target_iterations(ContinuationOptions(), scene) == 5
+    assert resolved_target_iterations(ContinuationOptions(target_iterations=3), scene) == 3
+    assert resolved_target_iterations(ContinuationOptions(), build_scene("balloon", nodes=21)) == TARGET_ITERATIONS
+    assert resolve_options(ContinuationOptions(), scene).abandon_diverging is True
+    assert resolve_options(ContinuationOptions(abandon_diverging=False), scene).abandon_diverging is False
+    assert resolve_options(ContinuationOptions(), build_scene("balloon", nodes=21)) == ContinuationOptions(**SCENE_DEFAULTS)
+    branch, child = _pair(101, **SCENE_DEFAULTS)
     fast, fast_child = study.timed_pair(101)
+    default, default_child = pairs[101]
+    assert len(default.table) == len(fast.table) and len(default_child.table) == len(fast_child.table)
     assert len(fast.table) + len(fast_child.table) < 0.6 * (len(branch.table) + len(child.table))
+    # the diverging correctors given up at once: the same points as running them to the limit, cheaper
+    patient, patient_child = _pair(101, abandon_diverging=False)
+    assert patient_child.table["control"].equals(fast_child.table["control"])
+    assert fast_child.stats["evaluations"] < patient_child.stats["evaluations"]
     assert list(fast.points["kind"]) == list(branch.points["kind"]) == ["BP", "BP"]
     # a pitchfork by the exchange symmetry: a = c = 0 to rounding at either BP location (the null
     # vector and the known tangent are made exactly antisymmetric and symmetric there), not only
@@ -377,3 +394,17 @@ def test_fast_options_locate_the_default_traces_points(pairs):
     away = fast_child.table[np.abs(fast_child.table["s"] - fold_s) > 0.1]
     assert len(away) > 5 and list(away["stable"]) == [pair_stable(a, b) for a, b in zip(away["stretch_1"],
                                                                                       away["stretch_2"])]
+
+
+def test_bps_located_to_the_eigenvalues_rounding_are_brents_to_its_xtol(pairs, monkeypatch):
+    """Locating a BP stops where the crossing eigenvalue is within rounding of |J|
+    (ChamberProblem.crossing_rounding) instead of bisecting noise to Brent's xtol: the same BPs to
+    1e-11 relative (control, pressure, each balloon's stretch), with fewer corrector evaluations."""
+    from snapmem.continuation.chambers import ChamberProblem
+    branch, _ = pairs[51]
+    monkeypatch.setattr(ChamberProblem, "crossing_rounding", 0.0)
+    to_xtol = trace(build_scene("two_balloons", nodes=51), "volume", until={"stretch_max": 2.8})
+    assert list(to_xtol.points["kind"]) == list(branch.points["kind"]) == ["BP", "BP"]
+    for column in ("control", "pressure", "stretch_1", "stretch_2"):
+        assert np.allclose(branch.points[column], to_xtol.points[column], rtol=1e-11, atol=0), column
+    assert branch.stats["evaluations"] < to_xtol.stats["evaluations"]

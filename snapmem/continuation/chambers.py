@@ -35,7 +35,7 @@ import numpy as np
 
 from snapmem.continuation.problems import PROBLEM_FACTORIES, LoadProblem
 from snapmem.errors import SnapmemError
-from snapmem.kernels.banded import BandedMatrix, BorderedMatrix, eigenvalues_near_zero
+from snapmem.kernels.banded import BandedMatrix, BorderedMatrix, eigenvalues_near_zero, scale_of
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
 from snapmem.model.chambers import ChamberKind, gas_compliance, gas_volume
 from snapmem.model.multi import MultiScene
@@ -75,6 +75,9 @@ class ChamberProblem(LoadProblem):
     the fluid and gas chambers), parameter ``control`` (see the module docstring)."""
 
     jacobian_is_stiffness = True        # J is singular exactly where the energy's Hessian is
+    #: A crossing eigenvalue of J within this fraction of |J| is at its zero to rounding: locating a
+    #: BP stops there (locate._crossing_ftol; the BPs of Brent's xtol alone to 1e-11, tests/test_chambers.py).
+    crossing_rounding = float(np.finfo(float).eps)
 
     def __init__(self, scene: MultiScene, control: str):
         self.scene, self.control = scene, control
@@ -175,11 +178,15 @@ class ChamberProblem(LoadProblem):
 
     def dF_dlam(self, x, lam):
         sc = self.scene
+        j = None if self.load is not None else self.multiplied.index(self.controlled)
+        if j is not None and sc.chambers[self.controlled].kind is ChamberKind.VOLUME:
+            d = np.zeros(self.n)              # a fluid's volume: dV*/dlam = 1, whatever the state
+            d[sc.n_free + j] = 1.0
+            return d
         q, loads = self.state(x, lam)
         if self.load is not None:
             return np.concatenate([sc.load_derivative(q, self.load, loads), np.zeros(len(self.multiplied))])
         d = np.zeros(self.n)
-        j = self.multiplied.index(self.controlled)
         _, _, dv_dlam = self.target(self.controlled, loads[sc.pressure_name(self.controlled)], lam)
         d[sc.n_free + j] = dv_dlam
         return d
@@ -203,11 +210,19 @@ class ChamberProblem(LoadProblem):
 
     def stability(self, J, x, lam, n_eigs, start=None, tol=1e-10, sweeps=40, lu=None):
         """(J's n_eigs eigenvalues nearest zero, the total energy's negative count on the chambers'
-        constraints (Haynsworth, module docstring), their vectors, the iterated subspace)."""
+        constraints (Haynsworth, module docstring), their vectors, the iterated subspace).
+
+        The iteration stops after :data:`ROUNDING_SWEEPS` sweeps if the eigenvalue nearest zero is
+        within :data:`ROUNDING_EIGENVALUE` |J| of it (at a BP): J^-1's huge Ritz value carries
+        eps / |eigenvalue| into the others, which never settle (all 40 sweeps ran there)."""
         if lu is None:
             lu = J.factor(J.A.factor())
-        eigs, vectors, subspace = eigenvalues_near_zero(J, n_eigs, start, lu, tol, max_iterations=sweeps,
+        first = min(sweeps, ROUNDING_SWEEPS)
+        eigs, vectors, subspace = eigenvalues_near_zero(J, n_eigs, start, lu, tol, max_iterations=first,
                                                         subspace=True)
+        if sweeps > first and not np.min(np.abs(eigs)) <= ROUNDING_EIGENVALUE * scale_of(J):
+            eigs, vectors, subspace = eigenvalues_near_zero(J, n_eigs, subspace, lu, tol,
+                                                            max_iterations=sweeps - first, subspace=True)
         negative = getattr(lu.inner, "negative", None)
         negative = J.A.negative_count() if negative is None else negative
         k = lu.S.shape[0]
@@ -217,6 +232,20 @@ class ChamberProblem(LoadProblem):
 
     def stiffness(self, J):
         return J
+
+    def arclength_factor(self, J, Fl, row, corner, lu=None):
+        """The tracer's arclength system [[J, Fl], [row^T, corner]] factorised as the band K bordered
+        once by k + 1 columns and rows ([-G, Fl's and row's state parts], corner [[-D, Fl's
+        pressure part], [row's, corner]]): one block elimination refined on the exact product, not
+        J's nested in the border's (3 band solves a solve, not 5). ``lu``: J's, whose K is reused."""
+        n, k = J.A.n, J.D.shape[0]
+        B = np.empty((n, k + 1))
+        B[:, :k], B[:, k] = J.B, Fl[:n]
+        C = np.empty((n, k + 1))
+        C[:, :k], C[:, k] = J.C, row[:n]
+        D = np.empty((k + 1, k + 1))
+        D[:k, :k], D[:k, k], D[k, :k], D[k, k] = J.D, Fl[n:], row[n:], corner[0][0]
+        return BorderedMatrix(J.A, B, C, D).factor(None if lu is None else lu.inner)
 
     def null_mode_borders(self, x, lam, J) -> list:
         return [self.dF_dlam(x, lam)]
@@ -311,6 +340,12 @@ class ChamberProblem(LoadProblem):
         return replace(p, x=p.x[perm], tangent=tangent,
                        vectors=None if p.vectors is None else p.vectors[perm],
                        subspace=None if p.subspace is None else p.subspace[perm], measured=None)
+
+
+#: Inverse-iteration sweeps after which an eigenvalue nearest zero at rounding ends the iteration
+#: (ChamberProblem.stability), and that rounding, relative to |J| (its largest diagonal entry).
+ROUNDING_SWEEPS = 8
+ROUNDING_EIGENVALUE = 1e3 * float(np.finfo(float).eps)
 
 
 def _chamber_problem(scene, control):

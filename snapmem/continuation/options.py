@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from snapmem.errors import SnapmemError, check_int, check_real
 
@@ -28,10 +28,18 @@ class ContinuationOptions:
         Corrector tolerance on max |R| relative to the scene's force scale, default 1e-10.
     max_corrector_iterations : int
         Default 8; more means the step is cut.
-    target_iterations : int
-        Corrector iterations aimed at; fewer grow the step, more shrink it. Default 3.
+    target_iterations : int or None
+        Corrector iterations aimed at; fewer grow the step, more shrink it. Default None: the
+        scene's own (its ``continuation_defaults``, listed by ``snapmem scenes``), else
+        3 (:data:`SCENE_DEFAULTS`, :func:`resolve_options`).
     max_angle : float
         Largest angle between consecutive tangents [rad] before a step is cut, default 0.3.
+    abandon_diverging : bool or None
+        Give a step's corrector up at the first Newton iterate whose max |R| exceeds the
+        predictor's (and 1e3 times the tolerance): it is diverging, and the step is cut at once
+        instead of after ``max_corrector_iterations`` (the trace's steps only: locating a point and
+        a switch's first step run their correctors to the limit).
+        Default None: the scene's, else False.
     n_eigs : int
         Eigenvalues nearest zero watched at every point, default 2 (the negative count comes
         from an LDL^T factorisation, not from these).
@@ -53,8 +61,9 @@ class ContinuationOptions:
     max_steps: int = 2000
     newton_tol: float = 1e-10
     max_corrector_iterations: int = 8
-    target_iterations: int = 3
+    target_iterations: int | None = None
     max_angle: float = 0.3
+    abandon_diverging: bool | None = None
     n_eigs: int = 2
     stability: bool = True
     locate: bool = True
@@ -69,12 +78,38 @@ class ContinuationOptions:
         check_int("max_steps", self.max_steps, minimum=1)
         check_real("newton_tol", self.newton_tol, minimum=0.0, min_inclusive=False)
         check_int("max_corrector_iterations", self.max_corrector_iterations, minimum=1)
-        check_int("target_iterations", self.target_iterations, minimum=1)
+        if self.target_iterations is not None:
+            check_int("target_iterations", self.target_iterations, minimum=1)
         check_real("max_angle", self.max_angle, minimum=0.0, min_inclusive=False, maximum=math.pi)
         check_int("n_eigs", self.n_eigs, minimum=1)
         if self.direction not in (1, -1):
             raise SnapmemError(f"direction = {self.direction!r}: must be +1 or -1")
         object.__setattr__(self, "save_at", tuple(check_real("save_at", v) for v in self.save_at))
+
+
+#: The options a scene may set for itself (its ``continuation_defaults``, e.g. ``two_balloons``':
+#: snapmem.catalog.chambers) where the caller leaves them None, with their values for a scene
+#: that does not.
+SCENE_DEFAULTS = {"target_iterations": 3, "abandon_diverging": False}
+
+#: Corrector iterations aimed at where neither the options nor the scene say otherwise.
+TARGET_ITERATIONS = SCENE_DEFAULTS["target_iterations"]
+
+
+def resolve_options(options: ContinuationOptions, scene) -> ContinuationOptions:
+    """``options`` with each of :data:`SCENE_DEFAULTS` left None set: to the scene's
+    ``continuation_defaults`` entry if it has one (a scene whose located points are proven not to
+    depend on them), else to the generic value. An option the caller set is kept."""
+    unset = [name for name in SCENE_DEFAULTS if getattr(options, name) is None]
+    if not unset:
+        return options
+    own = getattr(scene, "__dict__", {}).get("continuation_defaults") or {}
+    return replace(options, **{name: own.get(name, SCENE_DEFAULTS[name]) for name in unset})
+
+
+def resolved_target_iterations(options: ContinuationOptions, scene) -> int:
+    """The corrector iterations a trace of ``scene`` with ``options`` aims at (:func:`resolve_options`)."""
+    return resolve_options(options, scene).target_iterations
 
 
 @dataclass(frozen=True)

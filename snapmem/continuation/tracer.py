@@ -33,7 +33,7 @@ pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.continuation.branch import Branch, Outcome, Point, PointKind
 from snapmem.continuation.events import Event, Step, events_from
-from snapmem.continuation.options import ContinuationOptions
+from snapmem.continuation.options import ContinuationOptions, resolve_options
 from snapmem.continuation.problems import LoadProblem, make_problem
 from snapmem.errors import SnapmemError, SolverError
 from snapmem.kernels.banded import BorderedMatrix, scale_of
@@ -54,6 +54,7 @@ class Tracer:
     inner product and the work counters (Newton iterations, evaluations)."""
 
     def __init__(self, problem, options: ContinuationOptions, scene: Scene):
+        options = resolve_options(options, scene)          # the scene's own defaults where unset
         self.pb, self.opt, self.scene = problem, options, scene
         self.tol = options.newton_tol * scene.force_scale
         self.wx, self.wl = problem.x_weight, 1.0 / problem.lam_scale ** 2
@@ -64,6 +65,15 @@ class Tracer:
         """The arclength inner product of two (x, lambda) vectors (scaled, dimensionless)."""
         return float(a[:-1] @ (self.wx * b[:-1]) + self.wl * a[-1] * b[-1])
 
+    def arclength_factor(self, J, Fl, row, corner, lu=None):
+        """The factorisation of the arclength system [[J, Fl], [row^T, corner]]: the problem's own
+        (its ``arclength_factor``, e.g. a chamber problem's single bordering of the band) if it
+        has one, else J bordered (``lu``: J's factorisation, reused)."""
+        own = getattr(self.pb, "arclength_factor", None)
+        if own is not None:
+            return own(J, Fl, row, corner, lu)
+        return BorderedMatrix(J, Fl, row, corner).factor(lu)
+
     def tangent(self, x, lam, J, previous: np.ndarray | None, lu=None):
         """Unit tangent at (x, lam), oriented along ``previous`` (or the chosen direction);
         ``lu``: J's factorisation if already made."""
@@ -72,8 +82,7 @@ class Tracer:
             row, corner = np.zeros(x.size), [[1.0]]
         else:
             row, corner = self.wx * previous[:-1], [[self.wl * previous[-1]]]
-        M = BorderedMatrix(J, Fl, row, corner)
-        lu = M.factor(lu)
+        lu = self.arclength_factor(J, Fl, row, corner, lu)
         if lu.singular:
             raise SolverError("singular extended Jacobian: cannot compute the tangent")
         rhs = np.zeros(x.size + 1)
@@ -84,13 +93,16 @@ class Tracer:
             t *= self.opt.direction
         return t
 
-    def correct(self, base: Point, s: float, guess: tuple | None = None):
+    def correct(self, base: Point, s: float, guess: tuple | None = None, abandon_diverging: bool = False):
         """Newton on the arclength system from the predictor base + s t (or from ``guess``, an
-        (x, lam) nearer the solution). Returns (Point, J) or (None, why)."""
+        (x, lam) nearer the solution). Returns (Point, J) or (None, why). ``abandon_diverging``:
+        give up at the first iterate whose max |R| exceeds the predictor's (the trace's steps,
+        which are cut and tried again; not where a failure is final, locating or switching)."""
         t = base.tangent
         x, lam = (base.x + s * t[:-1], base.lam + s * t[-1]) if guess is None else guess
         row, corner = self.wx * t[:-1], [[self.wl * t[-1]]]
         last_step = np.inf
+        first_norm = None
         for it in range(self.opt.max_corrector_iterations + 1):
             why = self.pb.inadmissible(x, lam)
             if why is not None:
@@ -109,8 +121,11 @@ class Tracer:
                 return Point(x, lam, iterations=it), J
             if it == self.opt.max_corrector_iterations:
                 return None, f"corrector did not converge in {it} iterations (|R| = {norm:.2e})"
-            M = BorderedMatrix(J, self.pb.dF_dlam(x, lam), row, corner)
-            lu = M.factor()
+            if first_norm is None:
+                first_norm = norm
+            elif abandon_diverging and norm > first_norm and norm > 1e3 * tol:
+                return None, f"corrector diverging: |R| = {norm:.2e} at iteration {it}, above the predictor's {first_norm:.2e}"
+            lu = self.arclength_factor(J, self.pb.dF_dlam(x, lam), row, corner)
             if lu.singular:
                 return None, "singular extended Jacobian"
             d = lu.solve(-np.append(F, g))
@@ -207,6 +222,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     -------
     Branch
     """
+    options = resolve_options(options, scene)              # the scene's own defaults where unset
     pb = make_problem(scene, control)
     watch = events_from(options, until, scene) + list(events)
     tracer = Tracer(pb, options, scene)
@@ -223,7 +239,7 @@ def trace(scene: Scene, control: str = "pressure", until: Mapping[str, float] | 
     status, outcome = f"max_steps ({options.max_steps}) reached", Outcome.MAX_STEPS
     for step in range(options.max_steps):
         base = points[-1]
-        p, J = tracer.correct(base, ds)
+        p, J = tracer.correct(base, ds, abandon_diverging=options.abandon_diverging)
         reason = J if p is None else None
         if p is not None:
             p.s, p.ds = base.s + ds, ds

@@ -22,7 +22,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from snapmem.errors import SnapmemError, check_real
-from snapmem.kernels.assembly import swept_volume, volume_gradient
+from snapmem.kernels.assembly import volume_gradient
 from snapmem.kernels.banded import BandedMatrix
 from snapmem.kernels.switch import compiled
 from snapmem.model.chambers import Chamber
@@ -57,13 +57,18 @@ class MultiScene:
     name : str
     parameters : mapping, optional
         Recorded beside results.
+    continuation_defaults : mapping, optional
+        Continuation options this scene takes where the caller leaves them unset (None), e.g.
+        ``{"target_iterations": 5}`` (:func:`snapmem.continuation.options.resolved_target_iterations`);
+        an option the caller sets overrides it.
     """
 
     start_guess = None
 
     def __init__(self, membranes: Sequence[Scene], chambers: Sequence[Chamber], name: str = "multi",
-                 parameters: Mapping | None = None):
+                 parameters: Mapping | None = None, continuation_defaults: Mapping | None = None):
         self.membranes = tuple(membranes)
+        self.continuation_defaults = dict(continuation_defaults or {})
         self.chambers = tuple(chambers)
         if not self.membranes:
             raise SnapmemError("membranes: a multi-membrane scene needs at least one membrane")
@@ -92,7 +97,6 @@ class MultiScene:
         # membranes whose pressure work is the swept volume's alone (the chamber's fast path)
         self._swept = [compiled() and [type(t) for t in m.edge_terms + m.density_terms if "pressure" in t.loads]
                        == [PressureWork] for m in self.membranes]
-        self._edge_dofs = [(2 * m.meridian.edges[:, 0], 2 * m.meridian.edges[:, 1]) for m in self.membranes]
         self._twins = None                 # membrane i -> an earlier identical one (twin_of), found when first asked
         #: False: evaluate every membrane, identical or not (to check the reduction against).
         self.reuse_identical = True
@@ -310,8 +314,10 @@ class MultiScene:
         """(V_c [m^3], dV_c/dq on the free degrees of freedom (n_free,) [m^2], or None) of chamber c.
 
         A membrane whose pressure work is the swept volume's (:class:`PressureWork`) takes the
-        swept volume straight from its nodes and the gradient from the compiled kernel, without
-        the kinematics a full evaluation builds; any other takes its volume and load derivative.
+        gradient from the compiled kernel and the volume from it, V = q . dV/dq / 3 (the swept
+        volume is homogeneous of degree 3 in the coordinates; equal to the edge sum to rounding),
+        without the kinematics a full evaluation builds; any other takes its volume and load
+        derivative.
         """
         chamber = self.chambers[c]
         parts = self.split(q)
@@ -328,11 +334,13 @@ class MultiScene:
                     out[block] = out[self.free_offsets[twin]: self.free_offsets[twin + 1]]
                 continue
             if self._swept[i]:
-                a, b = self._edge_dofs[i]
-                own[i] = s * float(swept_volume.py_func(qi[a], qi[b], qi[b + 1] - qi[a + 1], 1.0)[0].sum())
+                # the swept volume is homogeneous of degree 3 in the coordinates (the formula
+                # of snapmem.kernels.assembly.swept_volume), so V = q . dV/dq / 3 (Euler): one compiled pass gives both
+                g = volume_gradient(qi, m.meridian.edges, qi.size)
+                own[i] = s * float(g @ qi) / 3.0
                 total += own[i]
                 if gradient:
-                    out[block] = s * volume_gradient(qi, m.meridian.edges, qi.size)[m.free]
+                    out[block] = s * g[m.free]
             else:
                 own[i] = s * m.volume(qi)
                 total += own[i]
