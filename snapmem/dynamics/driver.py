@@ -118,7 +118,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         internal = chambers
     else:
         stepper = _Stepper(scene, mass, c, options)
-        internal = _InternalState(scene, q)      # viscous networks' internal stretches (none: does nothing)
+        internal = _InternalState(scene, q, stepper.compiled)      # viscous networks' internal stretches (none: does nothing)
     if resume is not None:
         internal.restore(resume.get("internal", {}))
     free = scene.free
