@@ -22,6 +22,33 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from snapmem.dynamics.step_arithmetic import bdf2_anchor, largest_change, largest_entry, rate
+from snapmem.kernels.switch import compiled
+
+_KERNELS = {kernel.__name__: kernel for kernel in (bdf2_anchor, largest_change, largest_entry, rate)}
+
+
+def _kernel(name: str):
+    """A kernel of snapmem.dynamics.step_arithmetic, compiled (or its Python on the reference path)."""
+    kernel = _KERNELS[name]
+    return kernel if compiled() else kernel.py_func
+
+
+def _flat(x) -> np.ndarray:
+    """x as the kernels take it: a 1-d float array (a view where x is one already contiguous)."""
+    return np.ascontiguousarray(x, dtype=float).reshape(-1)
+
+
+def _rate(new, old, h):
+    """(new - old) / h [per s], on float arrays of one shape (states of any shape)."""
+    new = np.asarray(new)
+    return _kernel("rate")(_flat(new), _flat(old), float(h)).reshape(new.shape)
+
+
+def _free(free) -> np.ndarray:
+    """The free degrees of freedom as the kernels' int64 index array."""
+    return np.asarray(free, dtype=np.int64)
+
 
 @dataclass(frozen=True)
 class Anchor:
@@ -99,13 +126,13 @@ class Scheme:
 
     def acceleration(self, anchor: Anchor, v_new: np.ndarray) -> np.ndarray:
         """The mean acceleration over the step (v_{n+1} - v_n) / dt [m/s^2]."""
-        return (v_new - anchor.v) / anchor.dt
+        return _rate(v_new, anchor.v, anchor.dt)
 
     def local_error(self, dt: float, a_new: np.ndarray, a_prev: np.ndarray, free) -> float:
         """Local error estimate of a second-order scheme, c dt^2 max |a_new - a_prev| over the
         free degrees of freedom [m]."""
-        change = np.abs(a_new - a_prev)
-        return self.error_constant * dt * dt * float(change[free].max())
+        change = _kernel("largest_change")(_flat(a_new), _flat(a_prev), _free(free))
+        return self.error_constant * dt * dt * float(change)
 
 
 class ImplicitEuler(Scheme):
@@ -121,15 +148,15 @@ class ImplicitEuler(Scheme):
         return Anchor(self, q, v, dt, dt, t + dt)
 
     def new_state(self, anchor, y):
-        return y, (y - anchor.q) / anchor.h
+        return y, _rate(y, anchor.q, anchor.h)
 
     def rest_coefficients(self, dt, past_dt):
         return float(dt), 1.0, 0.0, 1.0, 0.0, 0.0
 
     def local_error(self, dt, a_new, a_prev, free):
         """(dt^2 / 2) max |a_new| over the free degrees of freedom [m]: Euler's local error."""
-        change = np.abs(a_new)
-        return self.error_constant * dt * dt * float(change[free].max())
+        change = _kernel("largest_entry")(_flat(a_new), _free(free))
+        return self.error_constant * dt * dt * float(change)
 
 
 class ImplicitMidpoint(Scheme):
@@ -188,8 +215,10 @@ class BDF2(Scheme):
             return self.start.anchor(q, v, t, dt, history)
         a0, a1, a2 = self.weights(dt, history[2])
         h = dt / a0
-        x_hat = -(a1 * q + a2 * history[0]) / a0
-        v_hat = -(a1 * v + a2 * history[1]) / a0
+        shape = np.shape(q)
+        x_hat, v_hat = _kernel("bdf2_anchor")(_flat(q), _flat(v), _flat(history[0]), _flat(history[1]), float(a0),
+                                              float(a1), float(a2))
+        x_hat, v_hat = x_hat.reshape(shape), v_hat.reshape(shape)
         return Anchor(self, x_hat, v_hat, h, dt, t + dt, start=q)
 
     @staticmethod
@@ -199,7 +228,7 @@ class BDF2(Scheme):
         return (1 + 2 * w) / (1 + w), -(1 + w), w * w / (1 + w)
 
     def new_state(self, anchor, y):
-        return y, (y - anchor.q) / anchor.h
+        return y, _rate(y, anchor.q, anchor.h)
 
     def rest_coefficients(self, dt, past_dt):
         if past_dt is None:
@@ -209,7 +238,7 @@ class BDF2(Scheme):
 
     def acceleration(self, anchor, v_new):
         """a_{n+1} = (v_{n+1} - v_hat) / h [m/s^2]."""
-        return (v_new - anchor.v) / anchor.h
+        return _rate(v_new, anchor.v, anchor.h)
 
 
 _EULER = ImplicitEuler()
