@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from snapmem.dynamics.step_arithmetic import bdf2_anchor, largest_change, largest_entry, rate
+from snapmem.dynamics.step_arithmetic import bdf2_anchor, largest_change, largest_entry
 from snapmem.kernels.switch import compiled
 
-_KERNELS = {kernel.__name__: kernel for kernel in (bdf2_anchor, largest_change, largest_entry, rate)}
+_KERNELS = {kernel.__name__: kernel for kernel in (bdf2_anchor, largest_change, largest_entry)}
 
 
 def _kernel(name: str):
@@ -34,20 +34,15 @@ def _kernel(name: str):
     return kernel if compiled() else kernel.py_func
 
 
-def _flat(x) -> np.ndarray:
-    """x as the kernels take it: a 1-d float array (a view where x is one already contiguous)."""
-    return np.ascontiguousarray(x, dtype=float).reshape(-1)
+def _states(*arrays) -> bool:
+    """Whether the arrays are what the kernels take: 1-d float arrays (a run's states; the
+    numpy expressions, with the same numbers, take any other shape)."""
+    return all(type(a) is np.ndarray and a.ndim == 1 and a.dtype == np.float64 for a in arrays)
 
 
-def _rate(new, old, h):
-    """(new - old) / h [per s], on float arrays of one shape (states of any shape)."""
-    new = np.asarray(new)
-    return _kernel("rate")(_flat(new), _flat(old), float(h)).reshape(new.shape)
-
-
-def _free(free) -> np.ndarray:
-    """The free degrees of freedom as the kernels' int64 index array."""
-    return np.asarray(free, dtype=np.int64)
+def _indices(free) -> bool:
+    """Whether ``free`` is an integer index array (a run's free degrees of freedom)."""
+    return type(free) is np.ndarray and free.dtype.kind == "i"
 
 
 @dataclass(frozen=True)
@@ -126,12 +121,15 @@ class Scheme:
 
     def acceleration(self, anchor: Anchor, v_new: np.ndarray) -> np.ndarray:
         """The mean acceleration over the step (v_{n+1} - v_n) / dt [m/s^2]."""
-        return _rate(v_new, anchor.v, anchor.dt)
+        return (v_new - anchor.v) / anchor.dt
 
     def local_error(self, dt: float, a_new: np.ndarray, a_prev: np.ndarray, free) -> float:
         """Local error estimate of a second-order scheme, c dt^2 max |a_new - a_prev| over the
         free degrees of freedom [m]."""
-        change = _kernel("largest_change")(_flat(a_new), _flat(a_prev), _free(free))
+        if _states(a_new, a_prev) and _indices(free):
+            change = _kernel("largest_change")(a_new, a_prev, free)
+        else:
+            change = np.abs(a_new - a_prev)[free].max()
         return self.error_constant * dt * dt * float(change)
 
 
@@ -148,14 +146,17 @@ class ImplicitEuler(Scheme):
         return Anchor(self, q, v, dt, dt, t + dt)
 
     def new_state(self, anchor, y):
-        return y, _rate(y, anchor.q, anchor.h)
+        return y, (y - anchor.q) / anchor.h
 
     def rest_coefficients(self, dt, past_dt):
         return float(dt), 1.0, 0.0, 1.0, 0.0, 0.0
 
     def local_error(self, dt, a_new, a_prev, free):
         """(dt^2 / 2) max |a_new| over the free degrees of freedom [m]: Euler's local error."""
-        change = _kernel("largest_entry")(_flat(a_new), _free(free))
+        if _states(a_new) and _indices(free):
+            change = _kernel("largest_entry")(a_new, free)
+        else:
+            change = np.abs(a_new)[free].max()
         return self.error_constant * dt * dt * float(change)
 
 
@@ -215,10 +216,11 @@ class BDF2(Scheme):
             return self.start.anchor(q, v, t, dt, history)
         a0, a1, a2 = self.weights(dt, history[2])
         h = dt / a0
-        shape = np.shape(q)
-        x_hat, v_hat = _kernel("bdf2_anchor")(_flat(q), _flat(v), _flat(history[0]), _flat(history[1]), float(a0),
-                                              float(a1), float(a2))
-        x_hat, v_hat = x_hat.reshape(shape), v_hat.reshape(shape)
+        if _states(q, v, history[0], history[1]):
+            x_hat, v_hat = _kernel("bdf2_anchor")(q, v, history[0], history[1], float(a0), float(a1), float(a2))
+        else:
+            x_hat = -(a1 * q + a2 * history[0]) / a0
+            v_hat = -(a1 * v + a2 * history[1]) / a0
         return Anchor(self, x_hat, v_hat, h, dt, t + dt, start=q)
 
     @staticmethod
@@ -228,7 +230,7 @@ class BDF2(Scheme):
         return (1 + 2 * w) / (1 + w), -(1 + w), w * w / (1 + w)
 
     def new_state(self, anchor, y):
-        return y, _rate(y, anchor.q, anchor.h)
+        return y, (y - anchor.q) / anchor.h
 
     def rest_coefficients(self, dt, past_dt):
         if past_dt is None:
@@ -238,7 +240,7 @@ class BDF2(Scheme):
 
     def acceleration(self, anchor, v_new):
         """a_{n+1} = (v_{n+1} - v_hat) / h [m/s^2]."""
-        return _rate(v_new, anchor.v, anchor.h)
+        return (v_new - anchor.v) / anchor.h
 
 
 _EULER = ImplicitEuler()
