@@ -243,10 +243,22 @@ def _entry_point(kernel, args: tuple):
     if not hasattr(dispatcher, "overloads"):            # a plain function (a test's stand-in)
         return kernel
     pattern = tuple(a is None for a in args)
-    matching = [compiled for signature, compiled in dispatcher.overloads.items()
+    overloads = dispatcher.overloads
+    key = (id(dispatcher), pattern)
+    known = _ENTRIES.get(key)
+    if known is not None and known[0] == len(overloads):    # no version compiled since: the same one
+        return known[1]
+    matching = [compiled for signature, compiled in overloads.items()
                 if len(signature) == len(args)
                 and tuple(type(t).__name__ == "NoneType" for t in signature) == pattern]
-    return matching[0].entry_point if len(matching) == 1 else dispatcher
+    entry = matching[0].entry_point if len(matching) == 1 else dispatcher
+    _ENTRIES[key] = (len(overloads), entry)
+    return entry
+
+
+#: (id of the dispatcher, None pattern) -> (its number of compiled versions then, the entry point)
+#: of :func:`_entry_point` (matching the versions' types costs ~0.15 ms: a short run's 1%)
+_ENTRIES: dict = {}
 
 
 def _plan(scene, law: LawDeclaration, linear: list, balls: list) -> tuple:
