@@ -29,7 +29,7 @@ from snapmem.kernels.assembly import (edge_assembly, edge_stretches, linear_law_
 from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,
                                     linear_barrier, linear_max_step, linear_min_gap)
 from snapmem.kernels.laws import electric_density, law_admissible, law_density, prestretch_chain
-from snapmem.kernels.viscous import edge_condensed, log_to_stretch
+from snapmem.kernels.viscous import anchor_internal, edge_condensed, log_to_stretch, update_internal
 from snapmem.model.contact import FRACTION_TO_BOUNDARY
 
 #: The assembly's order: energy and residual (GRADIENT), and the tangent (TANGENT).
@@ -53,6 +53,14 @@ LinearContacts = namedtuple("LinearContacts", ["lin_nodes", "lin_ptr", "lin_axis
 #: solves' warm start (K, 2, E), updated in place by every assembly (after it: zeta* there).
 #: zeta_warm_exp (K, 2, E) = exp(-2 zeta_warm), kept with it (the local solves need no exponential).
 Viscous = namedtuple("Viscous", ["visc_mu", "visc_jlim", "visc_c", "zeta_hat", "zeta_warm", "zeta_warm_exp"])
+#: A time step of the networks' internal log stretches, for the compiled step to open and close
+#: itself (snapmem.dynamics.stepper._InternalState): the state zeta_n and history zeta_{n-1}
+#: (K, 2, E; zeta_n again without history), the scheme's ``coefficients`` (h, c_now, c_previous,
+#: n_star, n_now, n_previous, dt) (snapmem.dynamics.stepper.scheme_coefficients and the step dt
+#: [s]), the viscosities eta_k [Pa s], and the outputs: ``zeta_new`` (K, 2, E) zeta_{n+1} and
+#: ``dissipated`` (1,) the step's dissipation [J], written when the solve converges.
+NetworkStep = namedtuple("NetworkStep", ["zeta", "zeta_previous", "coefficients", "viscosities", "zeta_new",
+                                         "dissipated"])
 #: The balls (edge contact), with the degree of freedom and border column of a ball's body (-1: fixed).
 Balls = namedtuple("Balls", ["ball_radius", "ball_dhat", "ball_coef", "ball_z0", "ball_dof", "ball_col",
                              "ball_weight"])
@@ -113,6 +121,27 @@ def start_networks(viscous):
             for e in range(viscous.zeta_hat.shape[2]):
                 viscous.zeta_warm[k, i, e] = viscous.zeta_hat[k, i, e]
                 viscous.zeta_warm_exp[k, i, e] = np.exp(-2.0 * viscous.zeta_hat[k, i, e])
+
+
+@njit(cache=True, nogil=True)
+def open_network_step(viscous, step):
+    """Open the networks' step: the anchor zeta_hat = c_now zeta_n + c_previous zeta_{n-1} and c =
+    eta / h (snapmem.kernels.viscous.anchor_internal, as the stepper's Python would)."""
+    coefficients = step.coefficients
+    anchor_internal(step.zeta, step.zeta_previous, coefficients[1], coefficients[2], viscous.zeta_hat)
+    for k in range(viscous.visc_c.size):
+        viscous.visc_c[k] = step.viscosities[k] / coefficients[0]
+
+
+@njit(cache=True, nogil=True)
+def close_network_step(viscous, step, weight):
+    """Close the networks' converged step from zeta* (``viscous.zeta_warm``): zeta_{n+1} into
+    ``step.zeta_new`` and the step's dissipation into ``step.dissipated`` [J]
+    (snapmem.kernels.viscous.update_internal)."""
+    coefficients = step.coefficients
+    step.dissipated[0] = update_internal(viscous.zeta_warm, step.zeta, step.zeta_previous, coefficients[3],
+                                         coefficients[4], coefficients[5], viscous.zeta_hat, coefficients[0],
+                                         coefficients[6], step.viscosities, weight, step.zeta_new)
 
 
 @njit(cache=True, nogil=True)

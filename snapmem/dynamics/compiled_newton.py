@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import (TANGENT, admissible, assemble, law_with_networks, max_step,
-                                                start_networks, state_ok)
+from snapmem.dynamics.compiled_assembly import (TANGENT, admissible, assemble, close_network_step, law_with_networks,
+                                                max_step, open_network_step, start_networks, state_ok)
 from snapmem.kernels.assembly import edge_stretches
 from snapmem.kernels.bordered import band_solve, bordered_solve
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
@@ -37,8 +37,8 @@ OUTCOMES = (
 
 
 @njit(cache=True, nogil=True)
-def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, linear, balls, viscous, pressure, a_el, tol,
-              size, max_iterations, max_cuts):
+def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, linear, balls, viscous, network_step,
+              pressure, a_el, tol, size, max_iterations, max_cuts):
     """One time step: its inertia M / h^2 + C / h, momentum M v / h and guess anchor + h v (on the
     free degrees of freedom; ``mass``, ``damping`` there), the tolerance kept above the inertia
     term's rounding floor (:func:`snapmem.solvers.rules.inertia_tolerance`), then damped Newton on
@@ -65,6 +65,8 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
         largest = max(largest, inertia[i])
     tol = inertia_tolerance(tol, largest, size)
     if viscous is not None:
+        if network_step is not None:
+            open_network_step(viscous, network_step)
         start_networks(viscous)
     guess = anchor + h * velocity
     if admissible(guess, P, general_law, linear, balls):
@@ -128,4 +130,6 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
     if viscous is not None and not last_at_q:      # the last assembly was a rejected trial: zeta* at q again
         lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
         law_with_networks(lam1, lam2, P, general_law, viscous)
+    if viscous is not None and network_step is not None and code == CONVERGED:
+        close_network_step(viscous, network_step, P.weight)
     return q, code, iterations, cuts, norm

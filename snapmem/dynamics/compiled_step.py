@@ -73,6 +73,12 @@ class CompiledStep:
         self.has_pressure = pressure
         # (output name, index in the kernel's contact arrays) of every contact, in the scene's order
         self._contacts = list(zip(contact_names(scene), contact_slots))
+        # the networks' step the kernel opens and closes itself (take_network_step), or None; and
+        # the state y of the last solve whose kernel wrote that step's new state
+        self._network_step = None
+        self.network_step_closed_at = None
+        # time_step's compiled entry point for these terms, by (networks is None, network_step is None)
+        self._entries = {}
 
     @classmethod
     def of(cls, scene) -> "CompiledStep | None":
@@ -125,6 +131,18 @@ class CompiledStep:
             start_networks(networks)
         return assemble(q, self.plan, *self.terms, networks, *self.kernel_loads(loads), inertia, anchor, momentum, TANGENT)
 
+    @property
+    def viscous_term(self):
+        """The scene's viscous networks' term the kernel covers (snapmem.model.viscous), or None."""
+        return self._viscous_term
+
+    def take_network_step(self, step) -> None:
+        """The next solve opens and closes the networks' step itself: ``step`` a
+        :data:`~snapmem.dynamics.compiled_assembly.NetworkStep` (None: the caller does it). The
+        term's open step must name the same anchor array the kernel writes (``begin_step`` with
+        the step's zeta_hat array, which the kernel fills before any solve, a handed-back one too)."""
+        self._network_step = step
+
     def _open_networks(self):
         """The viscous networks' arrays for the term's present state (None without networks): in an
         open step its c = eta / h and anchor zeta_hat (the local solves start there); outside a
@@ -147,7 +165,8 @@ class CompiledStep:
                         visc_c=np.empty_like(v.visc_c), zeta_hat=hat, zeta_warm=np.empty_like(hat),
                         zeta_warm_exp=np.empty_like(hat))
             self._step_networks = s if hat is zeta_hat and s.visc_mu is term.moduli else None
-        np.divide(term.viscosities, h, out=s.visc_c)
+        if self._network_step is None:      # else the kernel sets c = eta / h (open_network_step)
+            np.divide(term.viscosities, h, out=s.visc_c)
         return s
 
     def measures_many(self, Q, loads: list, xi=None) -> tuple:
@@ -185,15 +204,61 @@ class CompiledStep:
         back to the general path."""
         pressure, a_el = self.kernel_loads(loads)
         networks = self._open_networks()
-        y, code, iterations, cuts, norm = time_step(
-            anchor, velocity, h, mass, damping, fallback, self.plan, *self.terms, networks, pressure, a_el, tol,
-            size, options.max_iterations, options.max_cuts)
+        network_step = None if networks is None or self._viscous_term.open_step is None else self._network_step
+        self._network_step = None                     # one solve's
+        plain = np.ascontiguousarray        # the arrays as the compiled entry point types them (no copies)
+        args = (plain(anchor, dtype=float), plain(velocity, dtype=float), float(h), plain(mass, dtype=float),
+                plain(damping, dtype=float), plain(fallback, dtype=float), self.plan, *self.terms, networks,
+                network_step, pressure, a_el, float(tol), float(size), int(options.max_iterations), int(options.max_cuts))
+        key = (networks is None, network_step is None)
+        entry = self._entries.get(key)
+        if entry is None:
+            y, code, iterations, cuts, norm = time_step(*args)
+            self._entries[key] = _entry_point(time_step, args)
+        else:
+            y, code, iterations, cuts, norm = entry(*args)
+        if network_step is not None and networks.zeta_hat is not self._viscous_term.open_step[1]:
+            self._viscous_term.open_step[1][...] = networks.zeta_hat    # the kernel's anchor (a copy's): the term's
         if code == HANDED_BACK:
             return None
         if networks is not None and self._viscous_term.open_step is not None:   # zeta*(y): the driver's close reads it
             self._viscous_term.hand_over(y, networks.zeta_warm)     # read by the close, before the next solve
+            if network_step is not None and code == CONVERGED:
+                self.network_step_closed_at = y         # its new state and dissipation are written
         status, reason = OUTCOMES[code]
         return y, NewtonReport(code == CONVERGED, int(iterations), float(norm), reason, int(cuts), status=status)
+
+
+def _entry_point(kernel, args: tuple):
+    """The compiled function ``kernel`` (a numba dispatcher, or a lazy kernel with one) ran for
+    ``args`` (it has been called with them), to be called directly with arguments of the same
+    types: numba's dispatcher types every argument at every call (here some 45 arrays in the
+    plan's and terms' tuples, ~10 us a call: a few percent of a small scene's step), although
+    only the caller's arrays change, never their types.
+
+    Found without typing the arguments (numba.typeof of the tuples takes ~0.4 ms, a run's cost):
+    the one compiled version whose arguments are None where ``args`` are. If several versions
+    share that pattern (arrays of other layouts), the dispatcher is returned: it chooses."""
+    dispatcher = getattr(kernel, "dispatcher", kernel)
+    if not hasattr(dispatcher, "overloads"):            # a plain function (a test's stand-in)
+        return kernel
+    pattern = tuple(a is None for a in args)
+    overloads = dispatcher.overloads
+    key = (id(dispatcher), pattern)
+    known = _ENTRIES.get(key)
+    if known is not None and known[0] == len(overloads):    # no version compiled since: the same one
+        return known[1]
+    matching = [compiled for signature, compiled in overloads.items()
+                if len(signature) == len(args)
+                and tuple(type(t).__name__ == "NoneType" for t in signature) == pattern]
+    entry = matching[0].entry_point if len(matching) == 1 else dispatcher
+    _ENTRIES[key] = (len(overloads), entry)
+    return entry
+
+
+#: (id of the dispatcher, None pattern) -> (its number of compiled versions then, the entry point)
+#: of :func:`_entry_point` (matching the versions' types costs ~0.15 ms: a short run's 1%)
+_ENTRIES: dict = {}
 
 
 def _plan(scene, law: LawDeclaration, linear: list, balls: list) -> tuple:

@@ -23,6 +23,8 @@ import numpy as np
 from snapmem.dynamics.loads import as_schedule, schedule
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.schemes import SCHEME_BY_NAME
+from snapmem.dynamics.step_arithmetic import largest_leading as _largest_leading
+from snapmem.kernels.switch import compiled
 from snapmem.dynamics.stepper import _InternalState, _Recorder, _Stepper
 from snapmem.dynamics.supplies import chamber_parts, lumped_masses_of
 from snapmem.dynamics.trajectory import Trajectory
@@ -118,7 +120,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         internal = chambers
     else:
         stepper = _Stepper(scene, mass, c, options)
-        internal = _InternalState(scene, q)      # viscous networks' internal stretches (none: does nothing)
+        internal = _InternalState(scene, q, stepper.compiled)      # viscous networks' internal stretches (none: does nothing)
     if resume is not None:
         internal.restore(resume.get("internal", {}))
     free = scene.free
@@ -149,6 +151,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     status = "completed"
     scheme = SCHEME_BY_NAME[options.scheme]
     length = scene.meridian.size
+    largest_leading = _largest_leading if compiled() else _largest_leading.py_func    # max |q[:n]|
     breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
     held = HeldInterrupts().__enter__()                # SIGINT/SIGTERM noted, taken between two steps
     try:
@@ -206,7 +209,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             err = 0.0
             if options.adaptive:
                 est = anchor.scheme.local_error(dt, a_new, a_prev, free)
-                size = max(length, float(np.abs(q_new[: scene.n_node_dofs]).max()))     # grows with the membrane
+                size = max(length, float(largest_leading(q_new, scene.n_node_dofs)))     # grows with the membrane
                 err = est / (options.tol * size)
                 if err > 1.0 and dt > options.dt_min:
                     rejected += 1

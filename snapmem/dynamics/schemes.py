@@ -22,6 +22,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from snapmem.dynamics.step_arithmetic import bdf2_anchor, largest_change, largest_entry
+from snapmem.kernels.switch import compiled
+
+_KERNELS = {kernel.__name__: kernel for kernel in (bdf2_anchor, largest_change, largest_entry)}
+
+
+def _kernel(name: str):
+    """A kernel of snapmem.dynamics.step_arithmetic, compiled (or its Python on the reference path)."""
+    kernel = _KERNELS[name]
+    return kernel if compiled() else kernel.py_func
+
+
+def _states(*arrays) -> bool:
+    """Whether the arrays are what the kernels take: 1-d float arrays (a run's states; the
+    numpy expressions, with the same numbers, take any other shape)."""
+    return all(type(a) is np.ndarray and a.ndim == 1 and a.dtype == np.float64 for a in arrays)
+
+
+def _indices(free) -> bool:
+    """Whether ``free`` is an integer index array (a run's free degrees of freedom)."""
+    return type(free) is np.ndarray and free.dtype.kind == "i"
+
 
 @dataclass(frozen=True)
 class Anchor:
@@ -104,8 +126,11 @@ class Scheme:
     def local_error(self, dt: float, a_new: np.ndarray, a_prev: np.ndarray, free) -> float:
         """Local error estimate of a second-order scheme, c dt^2 max |a_new - a_prev| over the
         free degrees of freedom [m]."""
-        change = np.abs(a_new - a_prev)
-        return self.error_constant * dt * dt * float(change[free].max())
+        if _states(a_new, a_prev) and _indices(free):
+            change = _kernel("largest_change")(a_new, a_prev, free)
+        else:
+            change = np.abs(a_new - a_prev)[free].max()
+        return self.error_constant * dt * dt * float(change)
 
 
 class ImplicitEuler(Scheme):
@@ -128,8 +153,11 @@ class ImplicitEuler(Scheme):
 
     def local_error(self, dt, a_new, a_prev, free):
         """(dt^2 / 2) max |a_new| over the free degrees of freedom [m]: Euler's local error."""
-        change = np.abs(a_new)
-        return self.error_constant * dt * dt * float(change[free].max())
+        if _states(a_new) and _indices(free):
+            change = _kernel("largest_entry")(a_new, free)
+        else:
+            change = np.abs(a_new)[free].max()
+        return self.error_constant * dt * dt * float(change)
 
 
 class ImplicitMidpoint(Scheme):
@@ -188,8 +216,11 @@ class BDF2(Scheme):
             return self.start.anchor(q, v, t, dt, history)
         a0, a1, a2 = self.weights(dt, history[2])
         h = dt / a0
-        x_hat = -(a1 * q + a2 * history[0]) / a0
-        v_hat = -(a1 * v + a2 * history[1]) / a0
+        if _states(q, v, history[0], history[1]):
+            x_hat, v_hat = _kernel("bdf2_anchor")(q, v, history[0], history[1], float(a0), float(a1), float(a2))
+        else:
+            x_hat = -(a1 * q + a2 * history[0]) / a0
+            v_hat = -(a1 * v + a2 * history[1]) / a0
         return Anchor(self, x_hat, v_hat, h, dt, t + dt, start=q)
 
     @staticmethod

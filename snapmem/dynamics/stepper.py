@@ -18,6 +18,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from snapmem.dynamics.compiled_assembly import NetworkStep
 from snapmem.dynamics.compiled_step import CompiledStep
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.trajectory import Trajectory
@@ -106,9 +107,11 @@ class _InternalState:
     snapmem.dynamics.schemes), and one compiled call per step and term applies them
     (snapmem.kernels.viscous ``anchor_internal``, ``update_internal``, which adds the step's
     dissipation) into arrays kept for the run: no per-step arrays, no per-step Python on them.
+    Where the scene's compiled step (``compiled``) covers its one term, that step's own call does
+    both (``CompiledStep.take_network_step``): a step is one compiled call.
     """
 
-    def __init__(self, scene: Scene, q0: np.ndarray):
+    def __init__(self, scene: Scene, q0: np.ndarray, compiled: CompiledStep | None = None):
         self.scene, self.terms = scene, viscous_terms(scene)
         kin = scene.kinematics(q0)
         relaxed = np.log(np.stack([kin.lam1, kin.lam2]))
@@ -127,6 +130,11 @@ class _InternalState:
         self._pending = None               # the pending step's dissipation [J] of every term
         # the kernels of the run (compiled, or their Python on the reference path)
         self._anchor, self._update = self._kernel("anchor_internal"), self._kernel("update_internal")
+        # the compiled step that opens and closes the one term's steps itself, or None
+        self._fused = compiled if (compiled is not None and len(self.terms) == 1
+                                   and compiled.viscous_term is self.terms[0]) else None
+        self._step_coefficients = np.zeros(7)      # (h, c_now, c_previous, n_star, n_now, n_previous, dt)
+        self._dissipated = np.zeros(1)             # the fused step's dissipation [J]
 
     @staticmethod
     def _kernel(name: str):
@@ -140,6 +148,15 @@ class _InternalState:
         past_dt = None if history is None or self.previous is None else history[2]
         self._coefficients = coefficients = scheme_coefficients(scheme, t, dt, past_dt)
         h, c_now, c_previous = coefficients[:3]
+        if self._fused is not None:            # the compiled step's call opens (and closes) it
+            term, hat, values = self.terms[0], self._hats[0], self._step_coefficients
+            values[:6] = coefficients
+            values[6] = dt
+            previous = term.zeta if self.previous is None else self.previous[0]
+            self._fused.take_network_step(NetworkStep(term.zeta, previous, values, term.viscosities, self._news[0],
+                                                      self._dissipated))
+            term.begin_step(h, hat)
+            return
         for i, (term, hat) in enumerate(zip(self.terms, self._hats)):
             previous = term.zeta if self.previous is None else self.previous[i]
             self._anchor(term.zeta, previous, c_now, c_previous, hat)
@@ -150,7 +167,9 @@ class _InternalState:
         if not self.terms:
             return
         pending = None
-        if y is not None:
+        if y is not None and self._fused is not None and self._fused.network_step_closed_at is y:
+            pending = [float(self._dissipated[0])]            # the compiled step wrote the new state
+        elif y is not None:
             h, _, _, n_star, n_now, n_previous = self._coefficients
             update, weight, pending = self._update, self.scene.weight, []
             for i, (term, hat, new) in enumerate(zip(self.terms, self._hats, self._news)):
