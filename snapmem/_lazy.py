@@ -301,36 +301,10 @@ def interpreted() -> list[str]:
     return [f"{module}.{name}" for module, name in _seen]
 
 
-def _cache_dirs(source: str) -> list[str]:
-    """Where numba looks for a function's cache (numba.core.caching's locators, in order)."""
-    import hashlib
-    directory = os.path.dirname(os.path.abspath(source))
-    subpath = "_".join([os.path.basename(directory), hashlib.sha1(directory.encode()).hexdigest()])
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        return [os.path.join(os.environ["NUMBA_CACHE_DIR"], subpath)]
-    user = os.path.join(os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "numba", subpath)
-    return [os.path.join(directory, "__pycache__"), user]
-
-
 def _in_cache(kernel: "Kernel") -> bool:
-    """Whether numba's cache holds an index for the kernel newer than its source (a cheap test, no
-    numba import: a stale or other-typed entry makes numba compile, which is only slower)."""
-    code = kernel.py_func.__code__
-    source = code.co_filename
-    base = "%s.%s-%d.py%d%d%s.nbi" % (os.path.splitext(os.path.basename(source))[0],
-                                      kernel.__qualname__.replace("<", "").replace(">", ""), code.co_firstlineno,
-                                      sys.version_info[0], sys.version_info[1], getattr(sys, "abiflags", ""))
-    try:
-        stamp = os.stat(source).st_mtime
-    except OSError:
-        return True
-    for directory in _cache_dirs(source):
-        try:
-            if os.stat(os.path.join(directory, base)).st_mtime >= stamp:
-                return True
-        except OSError:
-            continue
-    return False
+    """Whether numba's cache holds the kernel (:func:`snapmem._numba_cache.in_cache`)."""
+    from snapmem._numba_cache import in_cache
+    return in_cache(kernel.py_func, kernel.__qualname__)
 
 
 def _describe(value):

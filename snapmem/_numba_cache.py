@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import sys
 
 ROOT = os.path.dirname(os.path.abspath(__file__))
 _stamp: list = []
@@ -122,3 +123,48 @@ def install() -> bool:
     except (ImportError, AttributeError, TypeError):
         _installed.append(False)
     return _installed[0]
+
+
+def cache_dirs(source: str) -> list[str]:
+    """Where numba looks for a function's cache (numba.core.caching's locators, in order)."""
+    directory = os.path.dirname(os.path.abspath(source))
+    subpath = "_".join([os.path.basename(directory), hashlib.sha1(directory.encode()).hexdigest()])
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return [os.path.join(os.environ["NUMBA_CACHE_DIR"], subpath)]
+    user = os.path.join(os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "numba", subpath)
+    return [os.path.join(directory, "__pycache__"), user]
+
+
+def in_cache(py_func, qualname: str) -> bool:
+    """Whether numba's cache holds an index for kernel ``py_func`` (named ``qualname``) that numba
+    will accept: for snapmem's kernels, one carrying the current :func:`kernel_sources_stamp` (read
+    from the index's first bytes, without importing numba), else one newer than the source file
+    (numba's own stamp). A cheap test made at a kernel's first call (snapmem._lazy's first-use
+    policy). A wrong guess costs a compile or a Python run, never a wrong number.
+
+    The stamp, not the file times: a file whose content returns to what the cache holds (a
+    revert, a branch switch) is newer than its index, which numba then loads without rewriting;
+    a test of times said "not cached" and ran such kernels as Python in every process.
+    """
+    code = py_func.__code__
+    source = code.co_filename
+    base = "%s.%s-%d.py%d%d%s.nbi" % (os.path.splitext(os.path.basename(source))[0],
+                                      qualname.replace("<", "").replace(">", ""), code.co_firstlineno,
+                                      sys.version_info[0], sys.version_info[1], getattr(sys, "abiflags", ""))
+    ours = _in_package(source)
+    try:
+        stamp = kernel_sources_stamp().encode() if ours else os.stat(source).st_mtime
+    except OSError:
+        return True
+    for directory in cache_dirs(source):
+        index = os.path.join(directory, base)
+        try:
+            if ours:
+                with open(index, "rb") as file:
+                    if stamp in file.read(512):          # numba's version, then (stamp, overloads) pickled
+                        return True
+            elif os.stat(index).st_mtime >= stamp:
+                return True
+        except OSError:
+            continue
+    return False

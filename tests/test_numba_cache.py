@@ -3,6 +3,7 @@ kernel whose callee (in another file) changed is compiled again, not loaded stal
 stamp is the kernel's file alone)."""
 
 import os
+import sys
 
 from snapmem import _lazy, _numba_cache
 
@@ -76,3 +77,36 @@ def test_cached_kernels_load_without_the_registries_and_later_compiles_still_wor
     assert first[1:] == second[1:]                                  # the loaded kernel's numbers are the compiled
     assert first[1] == "0" and abs(float(first[2]) - 56.0 / 15.0) < 1e-14   # d_2 = 4 - 1/3.75 = 56/15
     assert first[3:] == ["6.0", "6.0"]
+
+
+def test_in_cache_reads_the_index_stamp_not_the_file_times(tmp_path, monkeypatch):
+    """An index with the current stamp counts even when the source is newer than it (a file whose
+    content came back: numba loads that entry and does not rewrite the index); a stale stamp does
+    not, whatever the times."""
+    import pickle
+    import time
+    source = tmp_path / "kernels.py"
+    source.write_text("def halve(x):\n    return 0.5 * x\n")
+    namespace = {}
+    exec(compile(source.read_text(), str(source), "exec"), namespace)
+    halve = namespace["halve"]
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(_numba_cache, "_in_package", lambda path: True)
+    monkeypatch.setattr(_numba_cache, "_stamp", ["0123abcd" * 8])
+    directory = _numba_cache.cache_dirs(str(source))[0]
+    os.makedirs(directory)
+    index = os.path.join(directory, "kernels.halve-1.py%d%d%s.nbi" % (*sys.version_info[:2], getattr(sys, "abiflags", "")))
+
+    def write_index(stamp):
+        with open(index, "wb") as file:
+            pickle.dump("0.68.1", file, protocol=-1)
+            file.write(pickle.dumps((("snapmem kernels", stamp), {}), protocol=-1))
+
+    assert not _numba_cache.in_cache(halve, "halve")                      # no index
+    write_index("0123abcd" * 8)
+    time.sleep(0.01)
+    source.write_text(source.read_text())                                 # newer than the index, same content
+    assert os.stat(source).st_mtime > os.stat(index).st_mtime
+    assert _numba_cache.in_cache(halve, "halve")
+    write_index("ffff0000" * 8)                                           # another tree's kernels
+    assert not _numba_cache.in_cache(halve, "halve")
