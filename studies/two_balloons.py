@@ -24,6 +24,10 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import brentq
 
+#: ``--speed`` times compiled kernels: one not in numba's cache yet (after a change) compiles at its
+#: first call instead of running as Python (snapmem._lazy's first-use policy).
+os.environ.setdefault("SNAPMEM_COLD", "compile")
+
 from snapmem import build_scene
 from snapmem.continuation import ContinuationOptions, trace
 from snapmem.continuation.switching import switch_at

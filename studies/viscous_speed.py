@@ -32,6 +32,11 @@ from contextlib import contextmanager
 import numpy as np
 import pandas as pd
 
+#: Timings are of compiled kernels: one not in numba's cache yet (after a change) compiles at its
+#: first call here instead of running as Python (snapmem._lazy's first-use policy), also in the
+#: worker processes, which inherit the environment.
+os.environ.setdefault("SNAPMEM_COLD", "compile")
+
 from snapmem.catalog.robots import events, experiment
 from snapmem.dynamics.compiled_step import CompiledStep
 from snapmem.dynamics.driver import simulate
