@@ -39,7 +39,7 @@ GRADIENT, TANGENT = np.int64(1), np.int64(2)
 # membrane, its law and the scatter maps (Plan), and each kind of term the scene may not have.
 Plan = namedtuple("Plan", [
     "edges", "inv_length", "inv_mid_radius", "weight", "law_kind", "law_params",   # membrane; law: LAW_*
-    "law_stretch",                                                        # the law's prestretches (2,)
+    "law_stretch",                                  # the law's prestretches (2,), None for (1, 1)
     "hess_index", "band_size", "n_band", "bandwidth", "free", "radius_dofs", "n_node_dofs", "n_bodies",
     "edge_dofs", "edge_pos", "node_hess",                                 # scatter maps of node and edge terms
 ])
@@ -67,19 +67,39 @@ Balls = namedtuple("Balls", ["ball_radius", "ball_dhat", "ball_coef", "ball_z0",
 
 
 @njit(cache=True, nogil=True)
+def mounted_law_density(lam1, lam2, law_params, general_law, law_stretch):
+    """The law's density at the mounted stretches (lam1, lam2), its prestretches ``law_stretch``
+    (lp1, lp2) applied (None: none, the Plan's for (1, 1)): (w, w1, w2, w11, w12, w22) each (E,).
+    ``law_stretch`` an argument (not read from the Plan) so that numba prunes the prestretch's
+    code for a law without one; ``general_law`` None: LAW_LINEAR with ``law_params``."""
+    if law_stretch is None:
+        l1, l2 = lam1, lam2
+    else:
+        l1, l2 = law_stretch[0] * lam1, law_stretch[1] * lam2
+    if general_law is None:               # LAW_LINEAR: law_density's first branch
+        w, w1, w2, w11, w12, w22 = linear_law_density(l1, l2, law_params[0], law_params[1])
+    else:
+        w, w1, w2, w11, w12, w22 = law_density(l1, l2, general_law.law_kind, general_law.law_params)
+    if law_stretch is None:
+        return w, w1, w2, w11, w12, w22
+    return prestretch_chain(w, w1, w2, w11, w12, w22, law_stretch[0], law_stretch[1])
+
+
+@njit(cache=True, nogil=True)
+def mounted_admissible(lam1, lam2, general_law, law_stretch):
+    """Whether the mounted stretches (lam1, lam2), prestretched by ``law_stretch`` (None: none),
+    are inside ``general_law``'s domain (snapmem.kernels.laws.law_admissible)."""
+    if law_stretch is None:
+        return law_admissible(lam1, lam2, general_law.law_kind, general_law.law_params)
+    return law_admissible(law_stretch[0] * lam1, law_stretch[1] * lam2, general_law.law_kind, general_law.law_params)
+
+
+@njit(cache=True, nogil=True)
 def law_with_networks(lam1, lam2, P, general_law, viscous):
     """The law's density at the mounted stretches (lam1, lam2) (its prestretches applied) plus the
     viscous networks' condensed one, (w, w1, w2, w11, w12, w22) each (E,), and whether every local
     flow-rule solve converged. The networks' solutions are left in ``viscous.zeta_warm``."""
-    lp1, lp2 = P.law_stretch[0], P.law_stretch[1]
-    stretched = lp1 != 1.0 or lp2 != 1.0
-    l1, l2 = (lp1 * lam1, lp2 * lam2) if stretched else (lam1, lam2)
-    if general_law is None:               # LAW_LINEAR: law_density's first branch
-        w, w1, w2, w11, w12, w22 = linear_law_density(l1, l2, P.law_params[0], P.law_params[1])
-    else:
-        w, w1, w2, w11, w12, w22 = law_density(l1, l2, general_law.law_kind, general_law.law_params)
-    if stretched:
-        w, w1, w2, w11, w12, w22 = prestretch_chain(w, w1, w2, w11, w12, w22, lp1, lp2)
+    w, w1, w2, w11, w12, w22 = mounted_law_density(lam1, lam2, P.law_params, general_law, P.law_stretch)
     ok = True
     if viscous is not None:                  # per edge and network, numbers only (no arrays to allocate)
         for e in range(lam1.size):
@@ -278,8 +298,7 @@ def state_ok(q, P, general_law):
     if general_law is None:                  # LAW_LINEAR: every positive stretch is inside
         return True
     lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
-    return law_admissible(P.law_stretch[0] * lam1, P.law_stretch[1] * lam2, general_law.law_kind,
-                          general_law.law_params)
+    return mounted_admissible(lam1, lam2, general_law, P.law_stretch)
 
 
 @njit(cache=True, nogil=True)

@@ -269,7 +269,7 @@ def _plan(scene, law: LawDeclaration, linear: list, balls: list) -> tuple:
     plan = Plan(
         edges=_ints(m.edges), inv_length=m.inverse_length, inv_mid_radius=m.inverse_mid_radius, weight=scene.weight,
         law_kind=law.kind, law_params=np.array(law.params, dtype=float),
-        law_stretch=np.array(law.prestretch, dtype=float),
+        law_stretch=None if tuple(law.prestretch) == (1.0, 1.0) else np.array(law.prestretch, dtype=float),
         hess_index=_ints(dofs.hess_index), band_size=int(dofs.band_size), n_band=int(dofs.n_band),
         bandwidth=int(dofs.bandwidth), free=_ints(dofs.free), radius_dofs=_ints(dofs.radius_dofs),
         n_node_dofs=int(dofs.n_node_dofs), n_bodies=int(dofs.n_bodies),
