@@ -32,6 +32,11 @@ from snapmem.kernels.laws import electric_density, law_admissible, law_density, 
 from snapmem.kernels.viscous import anchor_internal, edge_condensed, log_to_stretch, update_internal
 from snapmem.model.contact import FRACTION_TO_BOUNDARY
 
+#: The njit options of the kernels here that only compiled code calls: numba then makes no CPython
+#: or C entry point for them (their wrappers' lowering and machine code cost ~50 ms a kernel at first
+#: use, issue 17). Such a kernel cannot be called from Python (it would crash): it says so.
+COMPILED_ONLY = dict(cache=True, nogil=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+
 #: The assembly's order: energy and residual (GRADIENT), and the tangent (TANGENT).
 GRADIENT, TANGENT = np.int64(1), np.int64(2)
 
@@ -66,7 +71,7 @@ Balls = namedtuple("Balls", ["ball_radius", "ball_dhat", "ball_coef", "ball_z0",
                              "ball_weight"])
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def mounted_law_density(lam1, lam2, law_params, general_law, law_stretch):
     """The law's density at the mounted stretches (lam1, lam2), its prestretches ``law_stretch``
     (lp1, lp2) applied (None: none, the Plan's for (1, 1)): (w, w1, w2, w11, w12, w22) each (E,).
@@ -85,7 +90,7 @@ def mounted_law_density(lam1, lam2, law_params, general_law, law_stretch):
     return prestretch_chain(w, w1, w2, w11, w12, w22, law_stretch[0], law_stretch[1])
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def mounted_admissible(lam1, lam2, general_law, law_stretch):
     """Whether the mounted stretches (lam1, lam2), prestretched by ``law_stretch`` (None: none),
     are inside ``general_law``'s domain (snapmem.kernels.laws.law_admissible)."""
@@ -94,7 +99,7 @@ def mounted_admissible(lam1, lam2, general_law, law_stretch):
     return law_admissible(law_stretch[0] * lam1, law_stretch[1] * lam2, general_law.law_kind, general_law.law_params)
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def law_with_networks(lam1, lam2, P, general_law, viscous):
     """The law's density at the mounted stretches (lam1, lam2) (its prestretches applied) plus the
     viscous networks' condensed one, (w, w1, w2, w11, w12, w22) each (E,), and whether every local
@@ -143,7 +148,7 @@ def start_networks(viscous):
                 viscous.zeta_warm_exp[k, i, e] = np.exp(-2.0 * viscous.zeta_hat[k, i, e])
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def open_network_step(viscous, step):
     """Open the networks' step: the anchor zeta_hat = c_now zeta_n + c_previous zeta_{n-1} and c =
     eta / h (snapmem.kernels.viscous.anchor_internal, as the stepper's Python would)."""
@@ -153,7 +158,7 @@ def open_network_step(viscous, step):
         viscous.visc_c[k] = step.viscosities[k] / coefficients[0]
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def close_network_step(viscous, step, weight):
     """Close the networks' converged step from zeta* (``viscous.zeta_warm``): zeta_{n+1} into
     ``step.zeta_new`` and the step's dissipation into ``step.dissipated`` [J]
@@ -164,7 +169,7 @@ def close_network_step(viscous, step, weight):
                                          coefficients[6], step.viscosities, weight, step.zeta_new)
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia, anchor, momentum, order):
     """The step's incremental potential Pi(q) + (1/2) d^T diag(inertia) d - momentum . d, d = (q -
     anchor) on the free degrees of freedom: (energy, residual, lower, border, corner, floor); the
@@ -268,6 +273,13 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
 
 
 @njit(cache=True, nogil=True)
+def assemble_entry(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia, anchor, momentum, order):
+    """:func:`assemble` for Python callers (CompiledStep.assemble, the tests): assemble itself,
+    called by compiled code only, has no Python entry point."""
+    return assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia, anchor, momentum, order)
+
+
+@njit(cache=True, nogil=True)
 def contact_gaps(q, P, linear, balls):
     """Smallest gap of every contact, linear ones first, then balls, shape (L + B,) [m]."""
     x = q[: P.n_node_dofs].reshape(-1, 2)
@@ -285,7 +297,7 @@ def contact_gaps(q, P, linear, balls):
     return gaps
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def state_ok(q, P, general_law):
     """q finite, free radii positive, no edge collapsed, inside the law's domain (Gent's lock):
     the domain apart from the contacts."""
@@ -312,7 +324,7 @@ def admissible(q, P, general_law, linear, balls):
     return gaps.size == 0 or np.min(gaps) > 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def max_step(q, dq, P, linear, balls):
     """Scene.max_step for the declared terms: radii, linear gaps and balls (nodes, then edges clear)."""
     alpha = radius_max_step(q, dq, P.n_node_dofs, FRACTION_TO_BOUNDARY)

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import TANGENT, GeneralLaw, admissible, assemble, max_step
+from snapmem.dynamics.compiled_assembly import COMPILED_ONLY, TANGENT, GeneralLaw, admissible, assemble, max_step
 from snapmem.dynamics.compiled_newton import (CONVERGED, HANDED_BACK, LEFT_DOMAIN, MAX_ITERATIONS, NOT_FINITE,
                                               OUTCOMES, START_OUTSIDE, STEP_TOO_SMALL)
 from snapmem.dynamics.compiled_step import CompiledStep
@@ -64,13 +64,13 @@ def chamber_target(kind, params, p):
     return params[0], 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def _membrane(x, i, offsets):
     """Membrane i's part of the stacked state, as its own contiguous array."""
     return x[offsets[i]: offsets[i + 1]].copy()
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def _volume(q, edges):
     """The swept volume of one meridian [m^3]."""
     v = 0.0
@@ -80,7 +80,7 @@ def _volume(q, edges):
     return v
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def _inside(x, n, plans, laws, linears, offsets, mem_unknown, mem_sign, dead, kinds, tparams, pressures):
     """Whether x = (y, p) is inside the domain: every membrane's (MultiScene.inadmissible), a gas
     chamber's volume positive, and (``pressures``) its absolute pressure positive."""
@@ -106,7 +106,7 @@ def _inside(x, n, plans, laws, linears, offsets, mem_unknown, mem_sign, dead, ki
     return True
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def _assemble_all(x, n, anchor, inertia, momentum, plans, laws, linears, a_el, mem_unknown, mem_sign, mem_pressure,
                   offsets, free_offsets, dead, kinds, tparams, row_scale, bandwidth):
     """Residual (N + k,) (the chamber rows scaled by ``row_scale``), stacked lower band (b + 1, N),

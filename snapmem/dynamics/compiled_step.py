@@ -30,8 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, Viscous, assemble,
-                                                contact_gaps, start_networks)
+from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, Viscous,
+                                                assemble_entry, contact_gaps, start_networks)
 from snapmem.dynamics.compiled_measures import frames_measures
 from snapmem.dynamics.compiled_newton import HANDED_BACK, OUTCOMES, CONVERGED, time_step
 from snapmem.kernels.laws import LAW_LINEAR
@@ -129,7 +129,8 @@ class CompiledStep:
         networks = self._open_networks()
         if networks is not None:
             start_networks(networks)
-        return assemble(q, self.plan, *self.terms, networks, *self.kernel_loads(loads), inertia, anchor, momentum, TANGENT)
+        return assemble_entry(q, self.plan, *self.terms, networks, *self.kernel_loads(loads), inertia, anchor, momentum,
+                              TANGENT)
 
     @property
     def viscous_term(self):
