@@ -26,16 +26,12 @@ from snapmem._lazy import njit
 
 from snapmem.kernels.assembly import (edge_assembly, edge_stretches, linear_law_density, radius_max_step,
                                      residual_floor, state_check)
+from snapmem.kernels.bordered import COMPILED_ONLY
 from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,
                                     linear_barrier, linear_max_step, linear_min_gap)
 from snapmem.kernels.laws import electric_density, law_admissible, law_density, prestretch_chain
 from snapmem.kernels.viscous import anchor_internal, edge_condensed, log_to_stretch, update_internal
 from snapmem.model.contact import FRACTION_TO_BOUNDARY
-
-#: The njit options of the kernels here that only compiled code calls: numba then makes no CPython
-#: or C entry point for them (their wrappers' lowering and machine code cost ~50 ms a kernel at first
-#: use, issue 17). Such a kernel cannot be called from Python (it would crash): it says so.
-COMPILED_ONLY = dict(cache=True, nogil=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 
 #: The assembly's order: energy and residual (GRADIENT), and the tangent (TANGENT).
 GRADIENT, TANGENT = np.int64(1), np.int64(2)
@@ -76,7 +72,8 @@ def mounted_law_density(lam1, lam2, law_params, general_law, law_stretch):
     """The law's density at the mounted stretches (lam1, lam2), its prestretches ``law_stretch``
     (lp1, lp2) applied (None: none, the Plan's for (1, 1)): (w, w1, w2, w11, w12, w22) each (E,).
     ``law_stretch`` an argument (not read from the Plan) so that numba prunes the prestretch's
-    code for a law without one; ``general_law`` None: LAW_LINEAR with ``law_params``."""
+    code for a law without one; ``general_law`` None: LAW_LINEAR with ``law_params``.
+    Compiled code only (COMPILED_ONLY)."""
     if law_stretch is None:
         l1, l2 = lam1, lam2
     else:
@@ -93,7 +90,7 @@ def mounted_law_density(lam1, lam2, law_params, general_law, law_stretch):
 @njit(**COMPILED_ONLY)
 def mounted_admissible(lam1, lam2, general_law, law_stretch):
     """Whether the mounted stretches (lam1, lam2), prestretched by ``law_stretch`` (None: none),
-    are inside ``general_law``'s domain (snapmem.kernels.laws.law_admissible)."""
+    are inside ``general_law``'s domain (snapmem.kernels.laws.law_admissible). Compiled code only (COMPILED_ONLY)."""
     if law_stretch is None:
         return law_admissible(lam1, lam2, general_law.law_kind, general_law.law_params)
     return law_admissible(law_stretch[0] * lam1, law_stretch[1] * lam2, general_law.law_kind, general_law.law_params)
@@ -103,7 +100,8 @@ def mounted_admissible(lam1, lam2, general_law, law_stretch):
 def law_with_networks(lam1, lam2, P, general_law, viscous):
     """The law's density at the mounted stretches (lam1, lam2) (its prestretches applied) plus the
     viscous networks' condensed one, (w, w1, w2, w11, w12, w22) each (E,), and whether every local
-    flow-rule solve converged. The networks' solutions are left in ``viscous.zeta_warm``."""
+    flow-rule solve converged. The networks' solutions are left in ``viscous.zeta_warm``.
+    Compiled code only (COMPILED_ONLY)."""
     w, w1, w2, w11, w12, w22 = mounted_law_density(lam1, lam2, P.law_params, general_law, P.law_stretch)
     ok = True
     if viscous is not None:                  # per edge and network, numbers only (no arrays to allocate)
@@ -151,7 +149,8 @@ def start_networks(viscous):
 @njit(**COMPILED_ONLY)
 def open_network_step(viscous, step):
     """Open the networks' step: the anchor zeta_hat = c_now zeta_n + c_previous zeta_{n-1} and c =
-    eta / h (snapmem.kernels.viscous.anchor_internal, as the stepper's Python would)."""
+    eta / h (snapmem.kernels.viscous.anchor_internal, as the stepper's Python would).
+    Compiled code only (COMPILED_ONLY)."""
     coefficients = step.coefficients
     anchor_internal(step.zeta, step.zeta_previous, coefficients[1], coefficients[2], viscous.zeta_hat)
     for k in range(viscous.visc_c.size):
@@ -162,7 +161,7 @@ def open_network_step(viscous, step):
 def close_network_step(viscous, step, weight):
     """Close the networks' converged step from zeta* (``viscous.zeta_warm``): zeta_{n+1} into
     ``step.zeta_new`` and the step's dissipation into ``step.dissipated`` [J]
-    (snapmem.kernels.viscous.update_internal)."""
+    (snapmem.kernels.viscous.update_internal). Compiled code only (COMPILED_ONLY)."""
     coefficients = step.coefficients
     step.dissipated[0] = update_internal(viscous.zeta_warm, step.zeta, step.zeta_previous, coefficients[3],
                                          coefficients[4], coefficients[5], viscous.zeta_hat, coefficients[0],
@@ -178,7 +177,7 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
     The same terms as ``Scene.evaluate`` (which documents them) for the declared terms, by the
     same kernels and formulas; ``general_law``, ``linear``, ``balls``, ``viscous``: the terms or None
     (module docstring). Energy inf also where a local flow-rule solve of the networks fails.
-    """
+     Compiled code only (COMPILED_ONLY)."""
     lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
     w, w1, w2, w11, w12, w22, local_ok = law_with_networks(lam1, lam2, P, general_law, viscous)
     if a_el != 0.0:                       # the electric term(s), -a lam1^2 lam2^2
@@ -300,7 +299,7 @@ def contact_gaps(q, P, linear, balls):
 @njit(**COMPILED_ONLY)
 def state_ok(q, P, general_law):
     """q finite, free radii positive, no edge collapsed, inside the law's domain (Gent's lock):
-    the domain apart from the contacts."""
+    the domain apart from the contacts. Compiled code only (COMPILED_ONLY)."""
     if state_check(q, P.radius_dofs) != -1:
         return False
     for e in range(P.edges.shape[0]):
@@ -326,7 +325,8 @@ def admissible(q, P, general_law, linear, balls):
 
 @njit(**COMPILED_ONLY)
 def max_step(q, dq, P, linear, balls):
-    """Scene.max_step for the declared terms: radii, linear gaps and balls (nodes, then edges clear)."""
+    """Scene.max_step for the declared terms: radii, linear gaps and balls (nodes, then edges clear).
+    Compiled code only (COMPILED_ONLY)."""
     alpha = radius_max_step(q, dq, P.n_node_dofs, FRACTION_TO_BOUNDARY)
     x, dx = q[: P.n_node_dofs].reshape(-1, 2), dq[: P.n_node_dofs].reshape(-1, 2)
     if linear is not None:

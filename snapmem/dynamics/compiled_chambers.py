@@ -66,13 +66,13 @@ def chamber_target(kind, params, p):
 
 @njit(**COMPILED_ONLY)
 def _membrane(x, i, offsets):
-    """Membrane i's part of the stacked state, as its own contiguous array."""
+    """Membrane i's part of the stacked state, as its own contiguous array. Compiled code only (COMPILED_ONLY)."""
     return x[offsets[i]: offsets[i + 1]].copy()
 
 
 @njit(**COMPILED_ONLY)
 def _volume(q, edges):
-    """The swept volume of one meridian [m^3]."""
+    """The swept volume of one meridian [m^3]. Compiled code only (COMPILED_ONLY)."""
     v = 0.0
     for e in range(edges.shape[0]):
         a, b = edges[e, 0], edges[e, 1]
@@ -83,7 +83,8 @@ def _volume(q, edges):
 @njit(**COMPILED_ONLY)
 def _inside(x, n, plans, laws, linears, offsets, mem_unknown, mem_sign, dead, kinds, tparams, pressures):
     """Whether x = (y, p) is inside the domain: every membrane's (MultiScene.inadmissible), a gas
-    chamber's volume positive, and (``pressures``) its absolute pressure positive."""
+    chamber's volume positive, and (``pressures``) its absolute pressure positive.
+    Compiled code only (COMPILED_ONLY)."""
     k = dead.size
     volumes = dead.copy()
     for i in range(len(plans)):
@@ -110,7 +111,8 @@ def _inside(x, n, plans, laws, linears, offsets, mem_unknown, mem_sign, dead, ki
 def _assemble_all(x, n, anchor, inertia, momentum, plans, laws, linears, a_el, mem_unknown, mem_sign, mem_pressure,
                   offsets, free_offsets, dead, kinds, tparams, row_scale, bandwidth):
     """Residual (N + k,) (the chamber rows scaled by ``row_scale``), stacked lower band (b + 1, N),
-    border -G^T (k, N), corner -D (k, k) and rounding floor of the bordered step at x = (y, p)."""
+    border -G^T (k, N), corner -D (k, k) and rounding floor of the bordered step at x = (y, p).
+    Compiled code only (COMPILED_ONLY)."""
     k = dead.size
     N = free_offsets[-1]
     residual = np.empty(N + k)
