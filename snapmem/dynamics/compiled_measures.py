@@ -76,7 +76,7 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
                 d = ball_edge_gaps(x, P.edges, zc, balls.ball_radius[c])
                 for e in range(d.size):
                     forces[t, n_lin + c] += barrier_force(d[e], balls.ball_dhat[c], balls.ball_coef[c, e])
-        if n_contacts:
+        if linear is not None or balls is not None:          # (pruned without contacts: not compiled)
             smallest = contact_gaps(q, P, linear, balls)
             for c in range(n_contacts):          # (a loop: row assignment compiles a shape check)
                 gaps[t, c] = smallest[c]
