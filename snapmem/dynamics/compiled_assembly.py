@@ -26,6 +26,7 @@ from snapmem._lazy import njit
 
 from snapmem.kernels.assembly import (edge_assembly, edge_stretches, linear_law_density, radius_max_step,
                                      residual_floor, state_check)
+from snapmem.kernels.bordered import COMPILED_ONLY
 from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,
                                     linear_barrier, linear_max_step, linear_min_gap)
 from snapmem.kernels.laws import electric_density, law_admissible, law_density, prestretch_chain
@@ -39,7 +40,7 @@ GRADIENT, TANGENT = np.int64(1), np.int64(2)
 # membrane, its law and the scatter maps (Plan), and each kind of term the scene may not have.
 Plan = namedtuple("Plan", [
     "edges", "inv_length", "inv_mid_radius", "weight", "law_kind", "law_params",   # membrane; law: LAW_*
-    "law_stretch",                                                        # the law's prestretches (2,)
+    "law_stretch",                                  # the law's prestretches (2,), None for (1, 1)
     "hess_index", "band_size", "n_band", "bandwidth", "free", "radius_dofs", "n_node_dofs", "n_bodies",
     "edge_dofs", "edge_pos", "node_hess",                                 # scatter maps of node and edge terms
 ])
@@ -66,20 +67,42 @@ Balls = namedtuple("Balls", ["ball_radius", "ball_dhat", "ball_coef", "ball_z0",
                              "ball_weight"])
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
+def mounted_law_density(lam1, lam2, law_params, general_law, law_stretch):
+    """The law's density at the mounted stretches (lam1, lam2), its prestretches ``law_stretch``
+    (lp1, lp2) applied (None: none, the Plan's for (1, 1)): (w, w1, w2, w11, w12, w22) each (E,).
+    ``law_stretch`` an argument (not read from the Plan) so that numba prunes the prestretch's
+    code for a law without one; ``general_law`` None: LAW_LINEAR with ``law_params``.
+    Compiled code only (COMPILED_ONLY)."""
+    if law_stretch is None:
+        l1, l2 = lam1, lam2
+    else:
+        l1, l2 = law_stretch[0] * lam1, law_stretch[1] * lam2
+    if general_law is None:               # LAW_LINEAR: law_density's first branch
+        w, w1, w2, w11, w12, w22 = linear_law_density(l1, l2, law_params[0], law_params[1])
+    else:
+        w, w1, w2, w11, w12, w22 = law_density(l1, l2, general_law.law_kind, general_law.law_params)
+    if law_stretch is None:
+        return w, w1, w2, w11, w12, w22
+    return prestretch_chain(w, w1, w2, w11, w12, w22, law_stretch[0], law_stretch[1])
+
+
+@njit(**COMPILED_ONLY)
+def mounted_admissible(lam1, lam2, general_law, law_stretch):
+    """Whether the mounted stretches (lam1, lam2), prestretched by ``law_stretch`` (None: none),
+    are inside ``general_law``'s domain (snapmem.kernels.laws.law_admissible). Compiled code only (COMPILED_ONLY)."""
+    if law_stretch is None:
+        return law_admissible(lam1, lam2, general_law.law_kind, general_law.law_params)
+    return law_admissible(law_stretch[0] * lam1, law_stretch[1] * lam2, general_law.law_kind, general_law.law_params)
+
+
+@njit(**COMPILED_ONLY)
 def law_with_networks(lam1, lam2, P, general_law, viscous):
     """The law's density at the mounted stretches (lam1, lam2) (its prestretches applied) plus the
     viscous networks' condensed one, (w, w1, w2, w11, w12, w22) each (E,), and whether every local
-    flow-rule solve converged. The networks' solutions are left in ``viscous.zeta_warm``."""
-    lp1, lp2 = P.law_stretch[0], P.law_stretch[1]
-    stretched = lp1 != 1.0 or lp2 != 1.0
-    l1, l2 = (lp1 * lam1, lp2 * lam2) if stretched else (lam1, lam2)
-    if general_law is None:               # LAW_LINEAR: law_density's first branch
-        w, w1, w2, w11, w12, w22 = linear_law_density(l1, l2, P.law_params[0], P.law_params[1])
-    else:
-        w, w1, w2, w11, w12, w22 = law_density(l1, l2, general_law.law_kind, general_law.law_params)
-    if stretched:
-        w, w1, w2, w11, w12, w22 = prestretch_chain(w, w1, w2, w11, w12, w22, lp1, lp2)
+    flow-rule solve converged. The networks' solutions are left in ``viscous.zeta_warm``.
+    Compiled code only (COMPILED_ONLY)."""
+    w, w1, w2, w11, w12, w22 = mounted_law_density(lam1, lam2, P.law_params, general_law, P.law_stretch)
     ok = True
     if viscous is not None:                  # per edge and network, numbers only (no arrays to allocate)
         for e in range(lam1.size):
@@ -123,28 +146,29 @@ def start_networks(viscous):
                 viscous.zeta_warm_exp[k, i, e] = np.exp(-2.0 * viscous.zeta_hat[k, i, e])
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def open_network_step(viscous, step):
     """Open the networks' step: the anchor zeta_hat = c_now zeta_n + c_previous zeta_{n-1} and c =
-    eta / h (snapmem.kernels.viscous.anchor_internal, as the stepper's Python would)."""
+    eta / h (snapmem.kernels.viscous.anchor_internal, as the stepper's Python would).
+    Compiled code only (COMPILED_ONLY)."""
     coefficients = step.coefficients
     anchor_internal(step.zeta, step.zeta_previous, coefficients[1], coefficients[2], viscous.zeta_hat)
     for k in range(viscous.visc_c.size):
         viscous.visc_c[k] = step.viscosities[k] / coefficients[0]
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def close_network_step(viscous, step, weight):
     """Close the networks' converged step from zeta* (``viscous.zeta_warm``): zeta_{n+1} into
     ``step.zeta_new`` and the step's dissipation into ``step.dissipated`` [J]
-    (snapmem.kernels.viscous.update_internal)."""
+    (snapmem.kernels.viscous.update_internal). Compiled code only (COMPILED_ONLY)."""
     coefficients = step.coefficients
     step.dissipated[0] = update_internal(viscous.zeta_warm, step.zeta, step.zeta_previous, coefficients[3],
                                          coefficients[4], coefficients[5], viscous.zeta_hat, coefficients[0],
                                          coefficients[6], step.viscosities, weight, step.zeta_new)
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia, anchor, momentum, order):
     """The step's incremental potential Pi(q) + (1/2) d^T diag(inertia) d - momentum . d, d = (q -
     anchor) on the free degrees of freedom: (energy, residual, lower, border, corner, floor); the
@@ -153,7 +177,7 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
     The same terms as ``Scene.evaluate`` (which documents them) for the declared terms, by the
     same kernels and formulas; ``general_law``, ``linear``, ``balls``, ``viscous``: the terms or None
     (module docstring). Energy inf also where a local flow-rule solve of the networks fails.
-    """
+     Compiled code only (COMPILED_ONLY)."""
     lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
     w, w1, w2, w11, w12, w22, local_ok = law_with_networks(lam1, lam2, P, general_law, viscous)
     if a_el != 0.0:                       # the electric term(s), -a lam1^2 lam2^2
@@ -248,6 +272,13 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
 
 
 @njit(cache=True, nogil=True)
+def assemble_entry(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia, anchor, momentum, order):
+    """:func:`assemble` for Python callers (CompiledStep.assemble, the tests): assemble itself,
+    called by compiled code only, has no Python entry point."""
+    return assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia, anchor, momentum, order)
+
+
+@njit(cache=True, nogil=True)
 def contact_gaps(q, P, linear, balls):
     """Smallest gap of every contact, linear ones first, then balls, shape (L + B,) [m]."""
     x = q[: P.n_node_dofs].reshape(-1, 2)
@@ -265,10 +296,10 @@ def contact_gaps(q, P, linear, balls):
     return gaps
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def state_ok(q, P, general_law):
     """q finite, free radii positive, no edge collapsed, inside the law's domain (Gent's lock):
-    the domain apart from the contacts."""
+    the domain apart from the contacts. Compiled code only (COMPILED_ONLY)."""
     if state_check(q, P.radius_dofs) != -1:
         return False
     for e in range(P.edges.shape[0]):
@@ -278,8 +309,7 @@ def state_ok(q, P, general_law):
     if general_law is None:                  # LAW_LINEAR: every positive stretch is inside
         return True
     lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
-    return law_admissible(P.law_stretch[0] * lam1, P.law_stretch[1] * lam2, general_law.law_kind,
-                          general_law.law_params)
+    return mounted_admissible(lam1, lam2, general_law, P.law_stretch)
 
 
 @njit(cache=True, nogil=True)
@@ -293,9 +323,10 @@ def admissible(q, P, general_law, linear, balls):
     return gaps.size == 0 or np.min(gaps) > 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def max_step(q, dq, P, linear, balls):
-    """Scene.max_step for the declared terms: radii, linear gaps and balls (nodes, then edges clear)."""
+    """Scene.max_step for the declared terms: radii, linear gaps and balls (nodes, then edges clear).
+    Compiled code only (COMPILED_ONLY)."""
     alpha = radius_max_step(q, dq, P.n_node_dofs, FRACTION_TO_BOUNDARY)
     x, dx = q[: P.n_node_dofs].reshape(-1, 2), dq[: P.n_node_dofs].reshape(-1, 2)
     if linear is not None:

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import TANGENT, GeneralLaw, admissible, assemble, max_step
+from snapmem.dynamics.compiled_assembly import COMPILED_ONLY, TANGENT, GeneralLaw, admissible, assemble, max_step
 from snapmem.dynamics.compiled_newton import (CONVERGED, HANDED_BACK, LEFT_DOMAIN, MAX_ITERATIONS, NOT_FINITE,
                                               OUTCOMES, START_OUTSIDE, STEP_TOO_SMALL)
 from snapmem.dynamics.compiled_step import CompiledStep
@@ -64,15 +64,15 @@ def chamber_target(kind, params, p):
     return params[0], 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def _membrane(x, i, offsets):
-    """Membrane i's part of the stacked state, as its own contiguous array."""
+    """Membrane i's part of the stacked state, as its own contiguous array. Compiled code only (COMPILED_ONLY)."""
     return x[offsets[i]: offsets[i + 1]].copy()
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def _volume(q, edges):
-    """The swept volume of one meridian [m^3]."""
+    """The swept volume of one meridian [m^3]. Compiled code only (COMPILED_ONLY)."""
     v = 0.0
     for e in range(edges.shape[0]):
         a, b = edges[e, 0], edges[e, 1]
@@ -80,10 +80,11 @@ def _volume(q, edges):
     return v
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def _inside(x, n, plans, laws, linears, offsets, mem_unknown, mem_sign, dead, kinds, tparams, pressures):
     """Whether x = (y, p) is inside the domain: every membrane's (MultiScene.inadmissible), a gas
-    chamber's volume positive, and (``pressures``) its absolute pressure positive."""
+    chamber's volume positive, and (``pressures``) its absolute pressure positive.
+    Compiled code only (COMPILED_ONLY)."""
     k = dead.size
     volumes = dead.copy()
     for i in range(len(plans)):
@@ -106,11 +107,12 @@ def _inside(x, n, plans, laws, linears, offsets, mem_unknown, mem_sign, dead, ki
     return True
 
 
-@njit(cache=True, nogil=True)
+@njit(**COMPILED_ONLY)
 def _assemble_all(x, n, anchor, inertia, momentum, plans, laws, linears, a_el, mem_unknown, mem_sign, mem_pressure,
                   offsets, free_offsets, dead, kinds, tparams, row_scale, bandwidth):
     """Residual (N + k,) (the chamber rows scaled by ``row_scale``), stacked lower band (b + 1, N),
-    border -G^T (k, N), corner -D (k, k) and rounding floor of the bordered step at x = (y, p)."""
+    border -G^T (k, N), corner -D (k, k) and rounding floor of the bordered step at x = (y, p).
+    Compiled code only (COMPILED_ONLY)."""
     k = dead.size
     N = free_offsets[-1]
     residual = np.empty(N + k)

@@ -7,9 +7,10 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import GRADIENT, assemble, contact_gaps
-from snapmem.kernels.assembly import swept_volume
-from snapmem.kernels.contact import ball_edge_gaps, barrier_force
+from snapmem.dynamics.compiled_assembly import GRADIENT, contact_gaps, law_with_networks
+from snapmem.kernels.assembly import edge_stretches, swept_volume
+from snapmem.kernels.contact import ball_edge_barrier, ball_edge_gaps, barrier_force, linear_barrier
+from snapmem.kernels.laws import electric_density
 
 
 @njit(cache=True, nogil=True)
@@ -19,23 +20,50 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
     gap [m] of every contact, linear ones first, then balls: energies (T,), volumes (T,), forces
     (T, C), gaps (T, C). ``general_law``, ``linear``, ``balls``: those terms or None (see
     :mod:`snapmem.dynamics.compiled_assembly`); without viscous networks (their stored energy
-    depends on each frame's internal stretches: CompiledStep.measures_many adds it)."""
+    depends on each frame's internal stretches: CompiledStep.measures_many adds it).
+
+    The energy is compiled_assembly.assemble's at zero inertia, term by term in its order (so the
+    same number to the bit), without the gradient: calling ``assemble`` here would optimise and
+    generate its whole call tree (the membrane's fused assembly) a second time at first use, some
+    1.5 s of a cold ``snapmem simulate`` (issue 17). The volume is the one edge_assembly sums.
+    """
     T = Q.shape[0]
     n_lin = 0 if linear is None else linear.lin_axis.size
     n_contacts = n_lin + (0 if balls is None else balls.ball_radius.size)
     energy, volume = np.empty(T), np.empty(T)
     forces, gaps = np.zeros((T, n_contacts)), np.empty((T, n_contacts))
-    zeros = np.zeros(P.free.size)
     for t in range(T):
         q = Q[t]
-        energy[t] = assemble(q, P, general_law, linear, balls, None, pressure[t], a_el[t], zeros, q, zeros,
-                             GRADIENT)[0]
+        lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
+        w = law_with_networks(lam1, lam2, P, general_law, None)[0]
+        if a_el[t] != 0.0:                    # the electric term(s), as assemble adds them
+            for e in range(w.size):
+                w[e] += electric_density(lam1[e], lam2[e], a_el[t])[0]
+        u = 0.0
+        for e in range(w.size):
+            u += P.weight[e] * w[e]
         v = 0.0
         for e in range(P.edges.shape[0]):
             a, b = P.edges[e, 0], P.edges[e, 1]
             v += swept_volume(q[2 * a], q[2 * b], q[2 * b + 1] - q[2 * a + 1], 1.0)[0]
         volume[t] = v
+        u -= pressure[t] * v
         x = q[: P.n_node_dofs].reshape(-1, 2)
+        if linear is not None:
+            for c in range(n_lin):
+                nodes = linear.lin_nodes[linear.lin_ptr[c]: linear.lin_ptr[c + 1]]
+                u += linear_barrier(x, nodes, linear.lin_axis[c], linear.lin_sign[c], linear.lin_offset[c],
+                                    linear.lin_coef[c], linear.lin_dhat[c], GRADIENT)[0]
+        if balls is not None:
+            for c in range(balls.ball_radius.size):
+                dof = balls.ball_dof[c]
+                body = dof >= 0
+                zc = q[dof] if body else balls.ball_z0[c]
+                u += ball_edge_barrier(x, P.edges, zc, balls.ball_radius[c], balls.ball_dhat[c], balls.ball_coef[c],
+                                       body, GRADIENT)[0]
+                if body:
+                    u += balls.ball_weight[c] * zc
+        energy[t] = u
         if linear is not None:
             for c in range(n_lin):
                 for k in range(linear.lin_ptr[c], linear.lin_ptr[c + 1]):
@@ -48,7 +76,7 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
                 d = ball_edge_gaps(x, P.edges, zc, balls.ball_radius[c])
                 for e in range(d.size):
                     forces[t, n_lin + c] += barrier_force(d[e], balls.ball_dhat[c], balls.ball_coef[c, e])
-        if n_contacts:
+        if linear is not None or balls is not None:          # (pruned without contacts: not compiled)
             smallest = contact_gaps(q, P, linear, balls)
             for c in range(n_contacts):          # (a loop: row assignment compiles a shape check)
                 gaps[t, c] = smallest[c]

@@ -30,8 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, Viscous, assemble,
-                                                contact_gaps, start_networks)
+from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, Viscous,
+                                                assemble_entry, contact_gaps, start_networks)
 from snapmem.dynamics.compiled_measures import frames_measures
 from snapmem.dynamics.compiled_newton import HANDED_BACK, OUTCOMES, CONVERGED, time_step
 from snapmem.kernels.laws import LAW_LINEAR
@@ -129,7 +129,8 @@ class CompiledStep:
         networks = self._open_networks()
         if networks is not None:
             start_networks(networks)
-        return assemble(q, self.plan, *self.terms, networks, *self.kernel_loads(loads), inertia, anchor, momentum, TANGENT)
+        return assemble_entry(q, self.plan, *self.terms, networks, *self.kernel_loads(loads), inertia, anchor, momentum,
+                              TANGENT)
 
     @property
     def viscous_term(self):
@@ -269,7 +270,7 @@ def _plan(scene, law: LawDeclaration, linear: list, balls: list) -> tuple:
     plan = Plan(
         edges=_ints(m.edges), inv_length=m.inverse_length, inv_mid_radius=m.inverse_mid_radius, weight=scene.weight,
         law_kind=law.kind, law_params=np.array(law.params, dtype=float),
-        law_stretch=np.array(law.prestretch, dtype=float),
+        law_stretch=None if tuple(law.prestretch) == (1.0, 1.0) else np.array(law.prestretch, dtype=float),
         hess_index=_ints(dofs.hess_index), band_size=int(dofs.band_size), n_band=int(dofs.n_band),
         bandwidth=int(dofs.bandwidth), free=_ints(dofs.free), radius_dofs=_ints(dofs.radius_dofs),
         n_node_dofs=int(dofs.n_node_dofs), n_bodies=int(dofs.n_bodies),
