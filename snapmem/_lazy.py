@@ -157,6 +157,8 @@ class Kernel:
         return [] if self._dispatcher is None else list(self._dispatcher.signatures)
 
     def __call__(self, *args):
+        if self.options.get("no_cpython_wrapper"):
+            return _run_as_python(self, args)       # no Python entry point (numba's would crash)
         dispatcher = self._dispatcher
         if dispatcher is not None:
             return dispatcher(*args)

@@ -78,6 +78,21 @@ def test_frame_measures_are_the_scenes(name, params, t):
     assert gap == (min(gaps) if gaps else np.inf)
 
 
+@pytest.mark.parametrize("name, params, t", CASES)
+def test_frame_energy_is_the_steps_potential_to_the_bit(name, params, t):
+    """frames_measures sums the potential term by term in the step's order instead of calling the
+    step's assembly (compile time): its energy must be the assembly's at zero inertia exactly, so
+    a term added to one and not to the other fails here."""
+    ex = experiment(name, **params)
+    s = ex.scene
+    loads = s.resolve_loads(ex.loads(t))
+    step = CompiledStep.of(s)
+    for seed in range(3):
+        q = perturbed(ex, 1e-6, seed)
+        zeros = np.zeros(s.free.size)
+        assert float(step.measures_many(q[None], [loads])[0][0]) == step.assemble(q, loads, zeros, q, zeros)[0]
+
+
 @pytest.mark.parametrize("k", [0, 1, 2])
 def test_bordered_solve_against_dense(k):
     rng = np.random.default_rng(k)

@@ -152,3 +152,18 @@ def test_state_check_twin_finds_what_the_kernel_finds(bad, expected):
     radius_dofs = np.arange(0, 8, 2, dtype=np.int64)
     kernel = ASSEMBLY["state_check"]
     assert kernel._twin(q, radius_dofs) == compiled(kernel)(q, radius_dofs) == expected
+
+
+def test_a_kernel_without_a_python_entry_point_runs_as_python_when_python_calls_it(monkeypatch):
+    """numba's dispatcher of a no_cpython_wrapper kernel crashes the process when called from
+    Python; the Kernel runs its Python instead (and compiled callers still link it)."""
+    import snapmem._lazy as lazy
+    monkeypatch.setattr(lazy, "_seen", {})
+    kernel = lazy.Kernel(lambda x: 2.0 * x, {"cache": False, "no_cpython_wrapper": True})
+    assert kernel(1.5) == 3.0 and kernel._dispatcher is None
+    pytest.importorskip("numba")
+    namespace = {"twice": kernel}
+    exec("def use(x):\n    return twice(x) + 1.0\n", namespace)
+    compiled_caller = lazy.Kernel(namespace["use"], {"cache": False})
+    assert compiled_caller.dispatcher(1.5) == 4.0          # links the compiled kernel
+    assert kernel(2.0) == 4.0                                # Python still gets the Python

@@ -26,7 +26,6 @@ from snapmem._lazy import njit
 
 from snapmem.kernels.assembly import (edge_assembly, edge_stretches, linear_law_density, radius_max_step,
                                      residual_floor, state_check)
-from snapmem.kernels.bordered import COMPILED_ONLY
 from snapmem.kernels.contact import (ball_edge_barrier, ball_edge_gaps, ball_min_gap, ball_node_max_step,
                                     linear_barrier, linear_max_step, linear_min_gap)
 from snapmem.kernels.laws import electric_density, law_admissible, law_density, prestretch_chain
@@ -65,6 +64,15 @@ NetworkStep = namedtuple("NetworkStep", ["zeta", "zeta_previous", "coefficients"
 #: The balls (edge contact), with the degree of freedom and border column of a ball's body (-1: fixed).
 Balls = namedtuple("Balls", ["ball_radius", "ball_dhat", "ball_coef", "ball_z0", "ball_dof", "ball_col",
                              "ball_weight"])
+
+
+#: The njit options of a kernel that only compiled code calls (the compiled time step's, here and
+#: in snapmem.dynamics.compiled_chambers): numba then makes no CPython or C entry point for it,
+#: whose lowering and machine code cost ~50 ms a kernel at first use (issue 17). numba's own
+#: dispatcher would crash if Python called it; snapmem._lazy.Kernel runs its Python instead
+#: (such a kernel's docstring says "compiled code only"). Kernels of snapmem.kernels, which
+#: kernels running as Python call on first use, never take these options.
+COMPILED_ONLY = dict(cache=True, nogil=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 
 
 @njit(**COMPILED_ONLY)

@@ -82,18 +82,10 @@ class BodyMatrix(BorderedMatrix):
 # ----------------------------------------------------------------------------------------------
 # the compiled bordered solve
 
-#: The njit options of a kernel that only compiled code calls (the compiled time step's, here and
-#: in snapmem.dynamics.compiled_*): numba then makes no CPython or C entry point for it, whose
-#: lowering and machine code cost ~50 ms a kernel at first use (issue 17). Called from Python, such
-#: a kernel would crash: its docstring says "compiled code only".
-COMPILED_ONLY = dict(cache=True, nogil=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
-
-
-@njit(**COMPILED_ONLY)
+@njit(cache=True, nogil=True)
 def _small_solve(S, g):
     """S^-1 g for the bodies' small k x k Schur complement: Gaussian elimination with partial
-    pivoting (numba's np.linalg.solve is slow to compile for what is a 2 x 2 at most).
-    Compiled code only (COMPILED_ONLY)."""
+    pivoting (numba's np.linalg.solve is slow to compile for what is a 2 x 2 at most)."""
     k = g.size
     A, x = S.copy(), g.copy()
     for c in range(k):
@@ -116,10 +108,9 @@ def _small_solve(S, g):
     return x
 
 
-@njit(**COMPILED_ONLY)
+@njit(cache=True, nogil=True)
 def _eliminate(F, border, Z, S, rhs):
-    """Block elimination of [[A, B], [B^T, C]] x = rhs with A = L D L^T (factors F), Z = A^-1 B, S the Schur.
-    Compiled code only (COMPILED_ONLY)."""
+    """Block elimination of [[A, B], [B^T, C]] x = rhs with A = L D L^T (factors F), Z = A^-1 B, S the Schur."""
     nb, k = F.shape[0], border.shape[0]
     x = rhs.copy()
     _ldlt_solve_vector(F, x[:nb])
