@@ -23,7 +23,6 @@ import numpy as np
 from snapmem.dynamics.loads import as_schedule, schedule
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.schemes import SCHEME_BY_NAME
-from snapmem.dynamics.step_arithmetic import largest_leading as _largest_leading
 from snapmem.kernels.switch import compiled
 from snapmem.dynamics.stepper import _InternalState, _Recorder, _Stepper
 from snapmem.dynamics.supplies import chamber_parts, lumped_masses_of
@@ -32,6 +31,7 @@ from snapmem.errors import SolverError, check_real
 from snapmem.io.interrupts import HeldInterrupts
 from snapmem.model.multi import MultiScene
 from snapmem.model.scene import Scene
+from snapmem.solvers.rules import max_abs
 from snapmem.threads import single_threaded
 
 # what callers import from here, the schedule and the options' and results' classes included
@@ -151,7 +151,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     status = "completed"
     scheme = SCHEME_BY_NAME[options.scheme]
     length = scene.meridian.size
-    largest_leading = _largest_leading if compiled() else _largest_leading.py_func    # max |q[:n]|
+    largest_abs = max_abs if compiled() else max_abs.py_func                     # max |q_i|
     breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
     held = HeldInterrupts().__enter__()                # SIGINT/SIGTERM noted, taken between two steps
     try:
@@ -209,7 +209,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             err = 0.0
             if options.adaptive:
                 est = anchor.scheme.local_error(dt, a_new, a_prev, free)
-                size = max(length, float(largest_leading(q_new, scene.n_node_dofs)))     # grows with the membrane
+                size = max(length, float(largest_abs(q_new[: scene.n_node_dofs])))     # grows with the membrane
                 err = est / (options.tol * size)
                 if err > 1.0 and dt > options.dt_min:
                     rejected += 1

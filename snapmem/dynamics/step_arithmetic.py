@@ -49,16 +49,3 @@ def largest_entry(a, free):
         if d > largest:
             largest = d
     return largest
-
-
-@njit(cache=True, nogil=True)
-def largest_leading(a, n):
-    """max |a[:n]| (NaN if any is NaN), np.abs(a[:n]).max()."""
-    largest = -np.inf
-    for i in range(n):
-        d = abs(a[i])
-        if d != d:
-            return d
-        if d > largest:
-            largest = d
-    return largest
