@@ -143,6 +143,25 @@ def law_with_networks(lam1, lam2, P, general_law, viscous):
     return w, w1, w2, w11, w12, w22, ok
 
 
+@njit(**COMPILED_ONLY)
+def membrane_density(lam1, lam2, P, general_law, viscous, a_el):
+    """The membrane's density per edge: :func:`law_with_networks` plus the electric term(s)
+    -a lam1^2 lam2^2 (``a_el``: the electric coefficient, 0 for none), (w, w1, w2, w11, w12, w22,
+    local solves ok). What the step's :func:`assemble` and the frames' measures
+    (snapmem.dynamics.compiled_measures) both sum. Compiled code only (COMPILED_ONLY)."""
+    w, w1, w2, w11, w12, w22, local_ok = law_with_networks(lam1, lam2, P, general_law, viscous)
+    if a_el != 0.0:
+        for e in range(w.size):
+            ew, e1, e2, e11, e12, e22 = electric_density(lam1[e], lam2[e], a_el)
+            w[e] += ew
+            w1[e] += e1
+            w2[e] += e2
+            w11[e] += e11
+            w12[e] += e12
+            w22[e] += e22
+    return w, w1, w2, w11, w12, w22, local_ok
+
+
 @njit(cache=True, nogil=True)
 def start_networks(viscous):
     """The local solves' warm start at the step's anchor: zeta_warm = zeta_hat, zeta_warm_exp =
@@ -187,16 +206,7 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
     (module docstring). Energy inf also where a local flow-rule solve of the networks fails.
      Compiled code only (COMPILED_ONLY)."""
     lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
-    w, w1, w2, w11, w12, w22, local_ok = law_with_networks(lam1, lam2, P, general_law, viscous)
-    if a_el != 0.0:                       # the electric term(s), -a lam1^2 lam2^2
-        for e in range(w.size):
-            ew, e1, e2, e11, e12, e22 = electric_density(lam1[e], lam2[e], a_el)
-            w[e] += ew
-            w1[e] += e1
-            w2[e] += e2
-            w11[e] += e11
-            w12[e] += e12
-            w22[e] += e22
+    w, w1, w2, w11, w12, w22, local_ok = membrane_density(lam1, lam2, P, general_law, viscous, a_el)
     energy = 0.0 if local_ok else np.inf
     for e in range(w.size):
         energy += P.weight[e] * w[e]

@@ -7,10 +7,9 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import GRADIENT, contact_gaps, law_with_networks
+from snapmem.dynamics.compiled_assembly import GRADIENT, contact_gaps, membrane_density
 from snapmem.kernels.assembly import edge_stretches, swept_volume
 from snapmem.kernels.contact import ball_edge_barrier, ball_edge_gaps, barrier_force, linear_barrier
-from snapmem.kernels.laws import electric_density
 
 
 @njit(cache=True, nogil=True)
@@ -23,7 +22,8 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
     depends on each frame's internal stretches: CompiledStep.measures_many adds it).
 
     The energy is compiled_assembly.assemble's at zero inertia, term by term in its order (so the
-    same number to the bit), without the gradient: calling ``assemble`` here would optimise and
+    same number to the bit; the membrane's density is the same ``membrane_density``), without the
+    gradient (tests/test_compiled_step.py holds the two equal): calling ``assemble`` here would optimise and
     generate its whole call tree (the membrane's fused assembly) a second time at first use, some
     1.5 s of a cold ``snapmem simulate`` (issue 17). The volume is the one edge_assembly sums.
     """
@@ -35,10 +35,7 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
     for t in range(T):
         q = Q[t]
         lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
-        w = law_with_networks(lam1, lam2, P, general_law, None)[0]
-        if a_el[t] != 0.0:                    # the electric term(s), as assemble adds them
-            for e in range(w.size):
-                w[e] += electric_density(lam1[e], lam2[e], a_el[t])[0]
+        w = membrane_density(lam1, lam2, P, general_law, None, a_el[t])[0]
         u = 0.0
         for e in range(w.size):
             u += P.weight[e] * w[e]
