@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 from snapmem._lazy import njit
+from snapmem.kernels.linalg import sum_in_order
 
 _EPS = np.finfo(np.float64).eps
 
@@ -177,12 +178,6 @@ def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12
     return gradient, band, volume, force
 
 
-def _sum_in_order(values):
-    """0.0 + values[0] + values[1] + ... added in sequence, as a compiled loop's ``total += v``
-    (``np.add.accumulate`` adds strictly in order; ``np.sum`` pairwise)."""
-    return 0.0 + np.add.accumulate(values)[-1] if values.size else 0.0
-
-
 @edge_assembly.python_twin
 def _edge_assembly_python(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12, w22, pressure,
                           band_index, n_band_entries, order):
@@ -190,10 +185,9 @@ def _edge_assembly_python(q, edges, inv_length, inv_mid_radius, weight, w1, w2, 
     ``np.add.at``, which adds in the order of its indices (the loop's order)."""
     n_edges = edges.shape[0]
     a, b = edges[:, 0], edges[:, 1]
-    with np.errstate(all="ignore"):
-        swept, g0, g1, g2, g3, *distinct = edge_terms.py_func(q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1],
-                                                              inv_length, inv_mid_radius, weight, w1, w2, w11, w12,
-                                                              w22, pressure, order >= 2)
+    swept, g0, g1, g2, g3, *distinct = edge_terms.py_func(q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1],
+                                                          inv_length, inv_mid_radius, weight, w1, w2, w11, w12,
+                                                          w22, pressure, order >= 2)
     gradient = np.zeros(q.size)
     np.add.at(gradient, np.stack([2 * a, 2 * a + 1, 2 * b, 2 * b + 1], axis=1).ravel(),
               np.stack([g0, g1, g2, g3], axis=1).ravel())
@@ -202,7 +196,7 @@ def _edge_assembly_python(q, edges, inv_length, inv_mid_radius, weight, w1, w2, 
     if order >= 2 and n_edges:
         entries = np.stack([np.broadcast_to(distinct[k], (n_edges,)) for k in HESSIAN_SLOTS], axis=1)
         np.add.at(band, band_index[:16 * n_edges].reshape(16, n_edges).T.ravel(), entries.ravel())
-    return gradient, band, _sum_in_order(np.broadcast_to(swept, (n_edges,))), force
+    return gradient, band, sum_in_order(np.broadcast_to(swept, (n_edges,))), force
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -234,8 +228,7 @@ def linear_law_density(lam1, lam2, W1, W2):
 
 @linear_law_density.python_twin
 def _linear_law_density_python(lam1, lam2, W1, W2):
-    with np.errstate(all="ignore"):
-        return tuple(np.broadcast_to(x, lam1.shape).copy() for x in linear_law_terms.py_func(lam1, lam2, W1, W2))
+    return tuple(np.broadcast_to(x, lam1.shape).copy() for x in linear_law_terms.py_func(lam1, lam2, W1, W2))
 
 
 @njit(cache=True, nogil=True)

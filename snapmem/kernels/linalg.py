@@ -229,19 +229,27 @@ def orthonormal(X: np.ndarray) -> np.ndarray:
     return Q
 
 
+def sum_in_order(values: np.ndarray):
+    """values[0] + values[1] + ... along the first axis, added in sequence from 0.0, as a compiled
+    loop's ``total += v`` rounds it (``np.add.accumulate`` adds strictly in order; ``np.sum``
+    adds pairwise). The Python twins' sums. 0.0 (or zeros) for no values."""
+    if values.shape[0] == 0:
+        return np.zeros(values.shape[1:])[()]
+    return 0.0 + np.add.accumulate(values, axis=0)[-1]
+
+
 @orthonormal.python_twin
 def _orthonormal_python(X):
-    """:func:`orthonormal` a column at a time: each sum over rows accumulated in the kernel's order
-    (``np.add.accumulate`` adds strictly in sequence, unlike ``np.sum``), from 0.0 as the kernel's."""
+    """:func:`orthonormal` a column at a time, each sum over rows in the kernel's order (:func:`sum_in_order`)."""
     n, m = X.shape
     Q = X.copy()
     for c in range(m):
         for _ in range(2):
             if c:
-                r = 0.0 + np.add.accumulate(Q[:, :c] * Q[:, c:c + 1], axis=0)[-1]
+                r = sum_in_order(Q[:, :c] * Q[:, c:c + 1])
                 for d in range(c):
                     Q[:, c] -= r[d] * Q[:, d]
-        norm = np.sqrt(0.0 + np.add.accumulate(Q[:, c] * Q[:, c])[-1])
+        norm = np.sqrt(sum_in_order(Q[:, c] * Q[:, c]))
         Q[:, c] /= norm
     return Q
 
@@ -332,7 +340,7 @@ def ritz_step(V: np.ndarray, W: np.ndarray):
 def _ritz_step_python(V, W):
     """:func:`ritz_step` on whole arrays, each sum in the kernel's order (see :func:`_orthonormal_python`)."""
     n, m = V.shape
-    H = 0.0 + np.add.accumulate(V[:, :, None] * W[:, None, :], axis=0)[-1]
+    H = sum_in_order(V[:, :, None] * W[:, None, :])
     for a in range(m):
         for c in range(a):
             H[a, c] = H[c, a] = 0.5 * (H[a, c] + H[c, a])
