@@ -103,7 +103,7 @@ def resolve_options(options: ContinuationOptions, scene) -> ContinuationOptions:
     unset = [name for name in SCENE_DEFAULTS if getattr(options, name) is None]
     if not unset:
         return options
-    own = getattr(scene, "__dict__", {}).get("continuation_defaults") or {}
+    own = getattr(scene, "continuation_defaults", None) or {}          # a MultiScene's (Scene has none)
     return replace(options, **{name: own.get(name, SCENE_DEFAULTS[name]) for name in unset})
 
 
