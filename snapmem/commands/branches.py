@@ -16,6 +16,7 @@ from snapmem.continuation import CONTROLS
 from snapmem.errors import SnapmemError, SolverError, check_int, check_real
 from snapmem.io.interrupts import HeldInterrupts
 from snapmem.io.progress import Progress
+from snapmem.io.table import stored
 from snapmem.model.parameters import check_memory
 from snapmem.sweeps.grid import parse_axis
 
@@ -91,12 +92,15 @@ def cmd_trace(args) -> int:
         branch.points = _sensitivities(branch, args.scene, params, control, args.sensitivity)
     meta = {"command": "trace", "scene": scene.name, "parameters": scene.parameters, "control": control,
             "until": until, "status": branch.status, "stats": branch.stats}
+    # the tables as the tracer left them (rows, until something reads them as DataFrames): writing
+    # and printing them needs no pandas
+    table, points = stored(branch, "table"), stored(branch, "points")
     with OutputSet() as outputs:                      # all of them or none; a signal waits for the set
         if args.out:
-            outputs.table(branch.table, args.out, meta)
+            outputs.table(table, args.out, meta)
             branch.save(outputs.stage(files["--out's states"][0]))
         if args.points:
-            outputs.table(branch.points, args.points, meta)
+            outputs.table(points, args.points, meta)
         if args.plot:
             from snapmem.viz.plotting import plot_branch
             x = args.x or next(iter(scene.probes), "u_max")
@@ -104,16 +108,16 @@ def cmd_trace(args) -> int:
                         title=f"{scene.name}: {branch.status}", control=control,
                         si=scene.mu != 1.0)
     print(f"status: {branch.status}")
-    print(f"points: {len(branch.table)}  steps: {branch.stats['steps']}  rejected: {branch.stats['rejected']}  "
+    print(f"points: {len(table)}  steps: {branch.stats['steps']}  rejected: {branch.stats['rejected']}  "
           f"newton_iterations: {branch.stats['newton_iterations']}")
-    for _, row in branch.points.iterrows():
+    for _, row in points.iterrows():
         print(f"{row['kind']}: {control if control != 'volume' else 'pressure'} = "
               f"{row['control'] if control != 'volume' else row['pressure']:.10g}  u_max = {row['u_max']:.6g}  "
               f"stretch_max = {row['stretch_max']:.6g}  located = {row['located']}")
-    if branch.points.empty:
+    if points.empty:
         print("no critical points")
-    for column in (c for c in branch.points.columns if c.startswith(f"d{control}_d")):
-        print(f"{column}: " + ", ".join(f"{v:.6g}" for v in branch.points[column]))
+    for column in (c for c in points.columns if c.startswith(f"d{control}_d")):
+        print(f"{column}: " + ", ".join(f"{v:.6g}" for v in points[column]))
     if held.received is not None:
         raise KeyboardInterrupt                        # exit 130, after the branch so far is written
     done = branch.outcome is Outcome.TARGET_REACHED or (branch.outcome is Outcome.FIRST_LIMIT

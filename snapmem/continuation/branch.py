@@ -14,6 +14,7 @@ pd = _lazy.module("pandas")  # imported at first use (start-up)
 from snapmem.continuation.problems import make_problem
 from snapmem.errors import SnapmemError, read_npz
 from snapmem.io.results import write_npz
+from snapmem.io.table import FrameField
 from snapmem.model.scene import Scene
 
 
@@ -95,13 +96,17 @@ class Branch:
         Why the trace stopped, in a sentence (e.g. 'stretch reached 4').
     outcome : Outcome
         The same in one word.
+
+    The three tables may be given as :class:`~snapmem.io.table.Rows`: each becomes its DataFrame
+    at its first read (pandas is imported then), and ``snapmem.io.table.stored(branch, "table")``
+    reads the rows without building it (``snapmem trace`` writes and prints them so).
     """
 
     scene: Scene
     control: str
-    table: pd.DataFrame
-    points: pd.DataFrame
-    rejections: pd.DataFrame
+    table: pd.DataFrame = FrameField()
+    points: pd.DataFrame = FrameField()
+    rejections: pd.DataFrame = FrameField()
     status: str
     outcome: Outcome
     states: list = field(repr=False, default_factory=list)

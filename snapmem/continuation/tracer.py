@@ -27,15 +27,13 @@ import math
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
-import snapmem._lazy as _lazy
-
-pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem.continuation.branch import Branch, Outcome, Point, PointKind
 from snapmem.continuation.events import Event, Step, events_from
 from snapmem.continuation.options import ContinuationOptions, resolve_options
 from snapmem.continuation.problems import LoadProblem, make_problem
 from snapmem.errors import SnapmemError, SolverError
+from snapmem.io.table import Rows
 from snapmem.kernels.banded import BorderedMatrix, scale_of
 from snapmem.model.scene import Scene
 from snapmem.solvers.newton import Equilibrium, solve
@@ -351,7 +349,8 @@ def _forget_rounding_inertia(first: Point, K) -> None:
 
 
 def _assemble(scene, control, pb, points, critical, rejections, status, outcome, tracer) -> Branch:
-    """The branch's tables (kinds written as their words) from its points."""
+    """The branch's tables (kinds written as their words) from its points: :class:`Rows`, which
+    become DataFrames at their first read (a trace that only writes them imports no pandas)."""
     rows = []
     for p in points:
         m = pb.point_measures(p)
@@ -362,21 +361,21 @@ def _assemble(scene, control, pb, points, critical, rejections, status, outcome,
                "point": _kind_word(p.kind, control) if p.kind in _SPECIAL else "",
                "save_at": p.kind == PointKind.SAVE, "ds": p.ds, "iterations": p.iterations}
         rows.append(row)
-    table = pd.DataFrame(rows)
+    table = Rows(rows)
     crit_rows = []
     for c in critical:
         m = pb.point_measures(c)
         crit_rows.append({"kind": _kind_word(c.kind, control), "s": c.s, "control": c.lam, **m,
                           "min_eig": c.test_value, "located": c.located, "coupling": c.coupling,
                           "crossed": c.crossed, "symmetry_broken": c.symmetry_broken, "mode": c.mode})
-    points_table = pd.DataFrame(crit_rows, columns=None if crit_rows else
+    points_table = Rows(crit_rows, columns=None if crit_rows else
                                 ["kind", "s", "control", "pressure", "voltage", "E_hat", "volume", "u_max",
                                  "stretch_max", "min_tension", "taut", "breakdown_margin", "rupture_margin", "min_eig", "located", "coupling",
                                  "crossed", "symmetry_broken", "mode"])
     stats = {"steps": int(sum(1 for p in points if p.kind == PointKind.STEP)) - 1, "rejected": len(rejections),
              "newton_iterations": tracer.newton_iterations, "evaluations": tracer.evaluations}
     return Branch(scene, control, table, points_table,
-                  pd.DataFrame(rejections, columns=["step", "s", "ds", "reason"]), status, outcome, points, stats)
+                  Rows(rejections, columns=["step", "s", "ds", "reason"]), status, outcome, points, stats)
 
 
 def _kind_word(kind: PointKind, control: str) -> str:

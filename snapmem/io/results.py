@@ -12,6 +12,7 @@ import snapmem._lazy as _lazy
 pd = _lazy.module("pandas")  # imported at first use (start-up)
 
 from snapmem._version import __version__
+from snapmem.io.table import write_csv
 
 
 def fsync_folder(folder) -> None:
@@ -31,6 +32,9 @@ def fsync_folder(folder) -> None:
 def write_table(table: pd.DataFrame, path, meta: dict | None = None) -> Path:
     """Write ``table`` to CSV at ``path`` and ``meta`` to the JSON sidecar ``path`` + '.json'.
 
+    ``table`` is a DataFrame or :class:`~snapmem.io.table.Rows` (written without pandas, the same
+    bytes as its DataFrame's ``to_csv(path, index=False)``).
+
     Written to a temporary file and renamed, so an interrupted run never leaves half a file.
     """
     path = Path(path)
@@ -38,7 +42,7 @@ def write_table(table: pd.DataFrame, path, meta: dict | None = None) -> Path:
         path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
     try:
-        table.to_csv(tmp, index=False)
+        write_csv(table, tmp)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)                    # only left if the write did not finish
@@ -135,7 +139,7 @@ class OutputSet:
         return staged
 
     def table(self, table: pd.DataFrame, path, meta: dict | None = None) -> Path:
-        """``table`` as CSV at ``path``, and ``meta`` at its sidecar ``path.json`` if given."""
+        """``table`` (a DataFrame or :class:`~snapmem.io.table.Rows`) as CSV at ``path``, and ``meta`` at its sidecar ``path.json`` if given."""
         write_table(table, self.stage(path))
         if meta is not None:
             write_json(meta, self.stage(sidecar(path)))
