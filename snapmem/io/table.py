@@ -160,6 +160,14 @@ def _kind(v) -> str | None:
 
 
 def _column_cells(values: list) -> list | None:
+    types = set(map(type, values))
+    if types and types <= {float, np.float64}:           # the common columns, at once
+        numbers = np.array(values, dtype=np.float64)
+        return [("" if s == "nan" else s) for s in numbers.astype(str).tolist()]
+    if types and types <= {bool, np.bool_}:
+        return ["True" if v else "False" for v in values]
+    if types == {str}:
+        return values
     kinds = [_kind(v) for v in values]
     if None in kinds:
         return None
