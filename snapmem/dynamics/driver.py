@@ -53,6 +53,11 @@ def lumped_masses(scene: Scene, rho: float) -> np.ndarray:
     return np.concatenate([m, [b.mass for b in scene.bodies]])
 
 
+def _identical(a: tuple, b: tuple) -> bool:
+    """Whether the tuples hold the same objects, one by one."""
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b))
+
+
 @single_threaded
 def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, damping: float = 0.0,
              q0: np.ndarray | None = None, v0: np.ndarray | None = None, t0: float = 0.0,
@@ -126,11 +131,16 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     free = scene.free
     massive = free[mass[free] > 0]          # a constraint's multiplier (support = free) has no mass, nor acceleration
 
-    last_loads = [None, None]
+    last_loads = [None, None, None, ()]      # t, the resolved loads, the schedule's dict at t and its items
 
     def loads_at(t):                     # a step asks for the loads at its end twice (solve, record)
         if last_loads[0] != t:
-            last_loads[:] = t, scene.resolve_loads(at(t))
+            given = at(t)
+            items = (*given, *given.values()) if type(given) is dict else None
+            # the same dict holding the very same keys and values (a constant schedule's) resolves alike
+            if items is None or given is not last_loads[2] or not _identical(items, last_loads[3]):
+                last_loads[1] = scene.resolve_loads(given)
+            last_loads[0], last_loads[2], last_loads[3] = t, given, items
         return last_loads[1] if chambers is None else chambers.with_pressures(last_loads[1])
 
     def acceleration(q, v, t):
