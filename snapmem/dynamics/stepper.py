@@ -135,7 +135,7 @@ class _InternalState:
                                    and compiled.viscous_term is self.terms[0]) else None
         self._step_coefficients = np.zeros(7)      # (h, c_now, c_previous, n_star, n_now, n_previous, dt)
         self._dissipated = np.zeros(1)             # the fused step's dissipation [J]
-        self._frame = _NetworksFrame(self) if self.terms else {}      # what frame() hands out (it reads the state)
+        self._frame = _NetworksFrame(self)         # what frame() hands out (it reads the state when read)
 
     @staticmethod
     def _kernel(name: str):
@@ -252,7 +252,7 @@ class _InternalState:
         trajectory has ``xi`` = exp(zeta)), ``dissipation`` [J] dissipated by the dashpots since the
         start. An empty mapping without networks. The same object at every step: it reads the
         state when the recorder reads it."""
-        return self._frame
+        return self._frame if self.terms else {}
 
 
 class _NetworksFrame(Mapping):
