@@ -80,6 +80,12 @@ class CompiledStep:
         self.network_step_closed_at = None
         # time_step's compiled entry point for these terms, by (networks is None, network_step is None)
         self._entries = {}
+        # the arguments of time_step that stay the same over a run (the stepper's mass and damping
+        # arrays, its tolerances and options): the key they were made for and the two parts of the
+        # argument tuple around the step's own ones (built once, not at every step)
+        self._fixed_key = None
+        self._fixed_arrays = self._fixed_tail = ()
+        self._middle = (plan, *terms)
 
     @classmethod
     def of(cls, scene) -> "CompiledStep | None":
@@ -116,8 +122,12 @@ class CompiledStep:
         """(pressure [Pa], a_el [Pa]) the kernels take for ``loads``: a_el = sum of eps/(2 H^2) phi^2
         over the electric terms. The compiled chamber step calls it per membrane."""
         pressure = float(loads["pressure"]) if self.has_pressure else 0.0
-        a_el = float(sum(c * float(loads["voltage"]) ** 2 for c in self._electric))   # float64 for numba, always
-        return pressure, a_el
+        a_el = 0                              # sum() of the terms' c phi^2, as a loop (a step's call)
+        if self._electric:
+            phi = float(loads["voltage"])
+            for c in self._electric:
+                a_el = a_el + c * phi ** 2
+        return pressure, float(a_el)          # float64 for numba, always
 
     def assemble(self, q, loads, inertia=None, anchor=None, momentum=None):
         """Energy, residual (n_free,), lower band (b + 1, n_band), border (k, n_band), corner (k, k)
@@ -203,15 +213,23 @@ class CompiledStep:
         incremental potential of step h from (anchor, velocity), with ``mass`` and ``damping`` on
         the free degrees of freedom, from the guess anchor + h velocity (``fallback``, the present
         state, if the guess is outside the domain). (y, NewtonReport), or None to hand the step
-        back to the general path."""
+        back to the general path. ``mass``, ``damping``, ``tol``, ``size`` and ``options`` are the
+        run's: their part of the kernel's arguments is made again only when one of them changes
+        (``mass`` and ``damping`` by identity: not rewritten in place between steps)."""
         pressure, a_el = self.kernel_loads(loads)
         networks = self._open_networks()
-        network_step = None if networks is None or self._viscous_term.open_step is None else self._network_step
+        open_step = None if networks is None else self._viscous_term.open_step
+        network_step = None if open_step is None else self._network_step
         self._network_step = None                     # one solve's
         plain = np.ascontiguousarray        # the arrays as the compiled entry point types them (no copies)
-        args = (plain(anchor, dtype=float), plain(velocity, dtype=float), float(h), plain(mass, dtype=float),
-                plain(damping, dtype=float), plain(fallback, dtype=float), self.plan, *self.terms, networks,
-                network_step, pressure, a_el, float(tol), float(size), int(options.max_iterations), int(options.max_cuts))
+        key = self._fixed_key               # the run's own arguments: the same objects at every step
+        if key is None or key[0] is not mass or key[1] is not damping or key[2] is not options or key[3:] != (tol, size):
+            self._fixed_key = (mass, damping, options, tol, size)
+            self._fixed_arrays = (plain(mass, dtype=float), plain(damping, dtype=float))
+            self._fixed_tail = (float(tol), float(size), int(options.max_iterations), int(options.max_cuts))
+        args = ((plain(anchor, dtype=float), plain(velocity, dtype=float), float(h)) + self._fixed_arrays
+                + (plain(fallback, dtype=float),) + self._middle + (networks, network_step, pressure, a_el)
+                + self._fixed_tail)
         key = (networks is None, network_step is None)
         entry = self._entries.get(key)
         if entry is None:
@@ -221,11 +239,11 @@ class CompiledStep:
             self._entries[key] = _entry_point(time_step, args)
         else:
             y, code, iterations, cuts, norm = entry(*args)
-        if network_step is not None and networks.zeta_hat is not self._viscous_term.open_step[1]:
-            self._viscous_term.open_step[1][...] = networks.zeta_hat    # the kernel's anchor (a copy's): the term's
+        if network_step is not None and networks.zeta_hat is not open_step[1]:
+            open_step[1][...] = networks.zeta_hat    # the kernel's anchor (a copy's): the term's
         if code == HANDED_BACK:
             return None
-        if networks is not None and self._viscous_term.open_step is not None:   # zeta*(y): the driver's close reads it
+        if open_step is not None:                   # zeta*(y): the driver's close reads it
             self._viscous_term.hand_over(y, networks.zeta_warm)     # read by the close, before the next solve
             if network_step is not None and code == CONVERGED:
                 self.network_step_closed_at = y         # its new state and dissipation are written

@@ -53,6 +53,11 @@ def lumped_masses(scene: Scene, rho: float) -> np.ndarray:
     return np.concatenate([m, [b.mass for b in scene.bodies]])
 
 
+def _identical(a: tuple, b: tuple) -> bool:
+    """Whether the tuples hold the same objects, one by one."""
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b))
+
+
 @single_threaded
 def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, damping: float = 0.0,
              q0: np.ndarray | None = None, v0: np.ndarray | None = None, t0: float = 0.0,
@@ -126,11 +131,16 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     free = scene.free
     massive = free[mass[free] > 0]          # a constraint's multiplier (support = free) has no mass, nor acceleration
 
-    last_loads = [None, None]
+    last_loads = [None, None, None, ()]      # t, the resolved loads, the schedule's dict at t and its items
 
     def loads_at(t):                     # a step asks for the loads at its end twice (solve, record)
         if last_loads[0] != t:
-            last_loads[:] = t, scene.resolve_loads(at(t))
+            given = at(t)
+            items = (*given, *given.values()) if type(given) is dict else None
+            # the same dict holding the very same keys and values (a constant schedule's) resolves alike
+            if items is None or given is not last_loads[2] or not _identical(items, last_loads[3]):
+                last_loads[1] = scene.resolve_loads(given)
+            last_loads[0], last_loads[2], last_loads[3] = t, given, items
         return last_loads[1] if chambers is None else chambers.with_pressures(last_loads[1])
 
     def acceleration(q, v, t):
@@ -153,9 +163,11 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     length = scene.meridian.size
     largest_abs = max_abs if compiled() else max_abs.py_func                     # max |q_i|
     breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
+    t_last = t_end - 1e-12 * max(1.0, abs(t_end))     # a run ends at t >= t_last (rounding of the steps' sum)
+    n_node_dofs = scene.n_node_dofs
     held = HeldInterrupts().__enter__()                # SIGINT/SIGTERM noted, taken between two steps
     try:
-        while t < t_end - 1e-12 * max(1.0, abs(t_end)):
+        while t < t_last:
             if held.received is not None:
                 status = f"interrupted at t = {t:.6g} s"
                 break
@@ -163,7 +175,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 status = f"max_steps = {options.max_steps} reached at t = {t:.6g} s"
                 break
             dt = min(dt, t_end - t)
-            upcoming = [b for b in breaks if t + 1e-12 < b < t + dt]
+            upcoming = [b for b in breaks if t + 1e-12 < b < t + dt] if breaks else None
             if upcoming:                                  # land on schedule kinks
                 dt = upcoming[0] - t
             if t_end - (t + dt) < 1e-3 * dt:
@@ -209,7 +221,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             err = 0.0
             if options.adaptive:
                 est = anchor.scheme.local_error(dt, a_new, a_prev, free)
-                size = max(length, float(largest_abs(q_new[: scene.n_node_dofs])))     # grows with the membrane
+                size = max(length, float(largest_abs(q_new[:n_node_dofs])))     # grows with the membrane
                 err = est / (options.tol * size)
                 if err > 1.0 and dt > options.dt_min:
                     rejected += 1
@@ -220,7 +232,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             internal.commit()
             steps += 1
             recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations,
-                            force=t >= t_end - 1e-12 * max(1.0, abs(t_end)), internal=internal.frame())
+                            force=t >= t_last, internal=internal.frame())
             if progress is not None:
                 progress(t, t_end)
             if stop is not None and stop(t, q, v):
@@ -247,7 +259,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         if status != "completed":
             log.warning("simulation stopped early: %s", status)
             recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True, internal=internal.frame())
-        elif stop is not None and t < t_end - 1e-12 * max(1.0, abs(t_end)):
+        elif stop is not None and t < t_last:
             status = "stopped by the stop condition"
         meta = {"scene": scene.name, "status": status, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
                 "damping": xi, "steps": steps, "rejected": rejected, "euler_fallbacks": fallbacks, "newton_iterations": iterations, "line_search_cuts": cuts,

@@ -29,15 +29,23 @@ _KERNELS = {kernel.__name__: kernel for kernel in (bdf2_anchor, largest_change, 
 
 
 def _kernel(name: str):
-    """A kernel of snapmem.dynamics.step_arithmetic, compiled (or its Python on the reference path)."""
+    """A kernel of snapmem.dynamics.step_arithmetic, compiled (or its Python on the reference path):
+    its numba dispatcher itself, not the lazy stand-in's call in front of it (these kernels always
+    compile, snapmem._lazy.ALWAYS_COMPILED, so the dispatcher is what that call would run)."""
     kernel = _KERNELS[name]
-    return kernel if compiled() else kernel.py_func
+    return getattr(kernel, "dispatcher", kernel) if compiled() else kernel.py_func
+
+
+_FLOAT64 = np.dtype(np.float64)
 
 
 def _states(*arrays) -> bool:
     """Whether the arrays are what the kernels take: 1-d float arrays (a run's states; the
-    numpy expressions, with the same numbers, take any other shape)."""
-    return all(type(a) is np.ndarray and a.ndim == 1 and a.dtype == np.float64 for a in arrays)
+    numpy expressions, with the same numbers, take any other shape). A loop: it runs at every step."""
+    for a in arrays:
+        if type(a) is not np.ndarray or a.ndim != 1 or a.dtype != _FLOAT64:
+            return False
+    return True
 
 
 def _indices(free) -> bool:

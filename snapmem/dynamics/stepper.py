@@ -135,6 +135,7 @@ class _InternalState:
                                    and compiled.viscous_term is self.terms[0]) else None
         self._step_coefficients = np.zeros(7)      # (h, c_now, c_previous, n_star, n_now, n_previous, dt)
         self._dissipated = np.zeros(1)             # the fused step's dissipation [J]
+        self._frame = _NetworksFrame(self)         # what frame() hands out (it reads the state when read)
 
     @staticmethod
     def _kernel(name: str):
@@ -249,8 +250,9 @@ class _InternalState:
         """What a frame records, read when the recorder keeps a frame (not every step): ``zeta``
         (K, 2, E) the internal log stretches of every network (all terms' networks stacked; the
         trajectory has ``xi`` = exp(zeta)), ``dissipation`` [J] dissipated by the dashpots since the
-        start. An empty mapping without networks."""
-        return _NetworksFrame(self) if self.terms else {}
+        start. An empty mapping without networks. The same object at every step: it reads the
+        state when the recorder reads it."""
+        return self._frame if self.terms else {}
 
 
 class _NetworksFrame(Mapping):
@@ -273,12 +275,19 @@ class _NetworksFrame(Mapping):
         return len(self.KEYS)
 
     def __getitem__(self, key):
-        if key == "zeta":                                # a copy: the arrays rotate
-            terms = self._state.terms
-            return terms[0].zeta.copy() if len(terms) == 1 else np.concatenate([term.zeta for term in terms])
+        if key == "zeta":
+            return self._zeta()
         if key == "dissipation":
             return self._state.dissipated
         raise KeyError(key)
+
+    def _zeta(self) -> np.ndarray:
+        terms = self._state.terms                        # a copy: the arrays rotate
+        return terms[0].zeta.copy() if len(terms) == 1 else np.concatenate([term.zeta for term in terms])
+
+    def read(self) -> dict:
+        """The frame's values now, as a dict (what the recorder keeps of a frame)."""
+        return {"zeta": self._zeta(), "dissipation": self._state.dissipated}
 
 
 class _Recorder:
@@ -312,11 +321,14 @@ class _Recorder:
         if not force and t - self.last_t < self.interval:
             self.min_gap = min(self.min_gap, self._gap(q))
             return
-        if self.rows and self.rows[-1]["t"] == t:
-            self.rows.pop()
+        rows = self.rows
+        if rows and rows[-1]["t"] == t:
+            rows.pop()
         kinetic = 0.5 * float(self.mass @ (v * v))
-        self.rows.append({"t": t, "q": q.copy(), "v": v.copy(), "kinetic": kinetic, "dt": dt, "newton": iterations,
-                          "min_gap": self.min_gap, "loads": loads, **(internal or {})})    # the frame's own gap joins it when measured
+        if type(internal) is _NetworksFrame:        # the networks' values now, read once
+            internal = internal.read()
+        rows.append({"t": t, "q": q.copy(), "v": v.copy(), "kinetic": kinetic, "dt": dt, "newton": iterations,
+                     "min_gap": self.min_gap, "loads": loads, **(internal or {})})    # the frame's own gap joins it when measured
         self.last_t = t
         self.min_gap = np.inf
 
