@@ -73,15 +73,37 @@ Balls = namedtuple("Balls", ["ball_radius", "ball_dhat", "ball_coef", "ball_z0",
 #: (such a kernel's docstring says "compiled code only"). Kernels of snapmem.kernels, which
 #: kernels running as Python call on first use, never take these options.
 COMPILED_ONLY = dict(cache=True, nogil=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+#: A compiled-only kernel whose body numba inlines into its callers' (no library, typing, LLVM
+#: pass or machine code of its own at first use, issue 17). Only for a kernel with no branch on an
+#: argument that may be None: numba prunes those in a kernel compiled for its arguments, not in
+#: an inlined body.
+INLINED = dict(COMPILED_ONLY, inline="always")
+
+
+@njit(**INLINED)
+def membrane_density(lam1, lam2, P, general_law, viscous, a_el):
+    """The membrane's density per edge (:func:`mounted_density` with the Plan's law), (w, w1, w2,
+    w11, w12, w22, local solves ok): what the step's :func:`assemble` and the frames' measures
+    (snapmem.dynamics.compiled_measures) both sum. Inlined (no branch of its own to prune).
+    Compiled code only (COMPILED_ONLY)."""
+    return mounted_density(lam1, lam2, P.law_params, P.law_stretch, general_law, viscous, a_el)
 
 
 @njit(**COMPILED_ONLY)
-def mounted_law_density(lam1, lam2, law_params, general_law, law_stretch):
-    """The law's density at the mounted stretches (lam1, lam2), its prestretches ``law_stretch``
-    (lp1, lp2) applied (None: none, the Plan's for (1, 1)): (w, w1, w2, w11, w12, w22) each (E,).
-    ``law_stretch`` an argument (not read from the Plan) so that numba prunes the prestretch's
-    code for a law without one; ``general_law`` None: LAW_LINEAR with ``law_params``.
-    Compiled code only (COMPILED_ONLY)."""
+def mounted_density(lam1, lam2, law_params, law_stretch, general_law, viscous, a_el):
+    """The membrane's density per edge at the mounted stretches (lam1, lam2): the law's (its
+    prestretches ``law_stretch`` (lp1, lp2) applied; None: none, the Plan's for (1, 1)), plus the
+    viscous networks' condensed one, plus the electric term(s) -a lam1^2 lam2^2 (``a_el``: the
+    electric coefficient, 0 for none): (w, w1, w2, w11, w12, w22) each (E,), and whether every
+    local flow-rule solve converged. The networks' solutions are left in ``viscous.zeta_warm``.
+    ``general_law`` None: LAW_LINEAR with ``law_params``. The step's re-evaluation of zeta* at q
+    calls it with ``a_el`` 0.
+
+    One kernel, not the law, the networks and the electric term each their own: every kernel is
+    a library of its own at first compilation (issue 17: about 0.4 s for the two it replaced).
+    ``law_stretch``, ``general_law`` and ``viscous`` are arguments, so that numba prunes their
+    code where they are None (it does not prune a tuple's field, nor an inline="always" kernel's
+    branches). Compiled code only (COMPILED_ONLY)."""
     if law_stretch is None:
         l1, l2 = lam1, lam2
     else:
@@ -90,27 +112,8 @@ def mounted_law_density(lam1, lam2, law_params, general_law, law_stretch):
         w, w1, w2, w11, w12, w22 = linear_law_density(l1, l2, law_params[0], law_params[1])
     else:
         w, w1, w2, w11, w12, w22 = law_density(l1, l2, general_law.law_kind, general_law.law_params)
-    if law_stretch is None:
-        return w, w1, w2, w11, w12, w22
-    return prestretch_chain(w, w1, w2, w11, w12, w22, law_stretch[0], law_stretch[1])
-
-
-@njit(**COMPILED_ONLY)
-def mounted_admissible(lam1, lam2, general_law, law_stretch):
-    """Whether the mounted stretches (lam1, lam2), prestretched by ``law_stretch`` (None: none),
-    are inside ``general_law``'s domain (snapmem.kernels.laws.law_admissible). Compiled code only (COMPILED_ONLY)."""
-    if law_stretch is None:
-        return law_admissible(lam1, lam2, general_law.law_kind, general_law.law_params)
-    return law_admissible(law_stretch[0] * lam1, law_stretch[1] * lam2, general_law.law_kind, general_law.law_params)
-
-
-@njit(**COMPILED_ONLY)
-def law_with_networks(lam1, lam2, P, general_law, viscous):
-    """The law's density at the mounted stretches (lam1, lam2) (its prestretches applied) plus the
-    viscous networks' condensed one, (w, w1, w2, w11, w12, w22) each (E,), and whether every local
-    flow-rule solve converged. The networks' solutions are left in ``viscous.zeta_warm``.
-    Compiled code only (COMPILED_ONLY)."""
-    w, w1, w2, w11, w12, w22 = mounted_law_density(lam1, lam2, P.law_params, general_law, P.law_stretch)
+    if law_stretch is not None:
+        w, w1, w2, w11, w12, w22 = prestretch_chain(w, w1, w2, w11, w12, w22, law_stretch[0], law_stretch[1])
     ok = True
     if viscous is not None:                  # per edge and network, numbers only (no arrays to allocate)
         for e in range(lam1.size):
@@ -140,16 +143,6 @@ def law_with_networks(lam1, lam2, P, general_law, viscous):
             w11[e] += v11
             w12[e] += v12
             w22[e] += v22
-    return w, w1, w2, w11, w12, w22, ok
-
-
-@njit(**COMPILED_ONLY)
-def membrane_density(lam1, lam2, P, general_law, viscous, a_el):
-    """The membrane's density per edge: :func:`law_with_networks` plus the electric term(s)
-    -a lam1^2 lam2^2 (``a_el``: the electric coefficient, 0 for none), (w, w1, w2, w11, w12, w22,
-    local solves ok). What the step's :func:`assemble` and the frames' measures
-    (snapmem.dynamics.compiled_measures) both sum. Compiled code only (COMPILED_ONLY)."""
-    w, w1, w2, w11, w12, w22, local_ok = law_with_networks(lam1, lam2, P, general_law, viscous)
     if a_el != 0.0:
         for e in range(w.size):
             ew, e1, e2, e11, e12, e22 = electric_density(lam1[e], lam2[e], a_el)
@@ -159,7 +152,7 @@ def membrane_density(lam1, lam2, P, general_law, viscous, a_el):
             w11[e] += e11
             w12[e] += e12
             w22[e] += e22
-    return w, w1, w2, w11, w12, w22, local_ok
+    return w, w1, w2, w11, w12, w22, ok
 
 
 @njit(cache=True, nogil=True)
@@ -214,8 +207,10 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
                                                   w12, w22, pressure, P.hess_index, P.band_size, order)
     energy -= pressure * volume
     k, nb = P.n_bodies, P.n_band
-    border = np.zeros((k, nb))
-    corner = np.zeros((k, k))
+    border = np.empty((k, nb))                 # zeros (as edge_assembly's: np.empty and a fill)
+    border[:] = 0.0
+    corner = np.empty((k, k))
+    corner[:] = 0.0
     x = q[: P.n_node_dofs].reshape(-1, 2)
     barrier_rounding = 0.0                # as snapmem.model.contact.barrier_rounding (the rounding floor's)
     if linear is not None:
@@ -280,7 +275,9 @@ def assemble(q, P, general_law, linear, balls, viscous, pressure, a_el, inertia,
         residual[i] = gradient[free[i]] + inertia[i] * d - momentum[i]
         energy += 0.5 * inertia[i] * d * d - momentum[i] * d
     if order < 2:
-        return energy, residual, np.zeros((nb, P.bandwidth + 1)).T, border, corner, 0.0
+        lower = np.empty((nb, P.bandwidth + 1)).T
+        lower[:] = 0.0
+        return energy, residual, lower, border, corner, 0.0
     lower = band[: P.band_size].reshape(nb, P.bandwidth + 1).T
     for i in range(nb):
         lower[0, i] += inertia[i]
@@ -312,6 +309,15 @@ def contact_gaps(q, P, linear, balls):
             zc = q[balls.ball_dof[c]] if balls.ball_dof[c] >= 0 else balls.ball_z0[c]
             gaps[n_lin + c] = np.min(ball_edge_gaps(x, P.edges, zc, balls.ball_radius[c]))
     return gaps
+
+
+@njit(**COMPILED_ONLY)
+def mounted_admissible(lam1, lam2, general_law, law_stretch):
+    """Whether the mounted stretches (lam1, lam2), prestretched by ``law_stretch`` (None: none),
+    are inside ``general_law``'s domain (snapmem.kernels.laws.law_admissible). Compiled code only (COMPILED_ONLY)."""
+    if law_stretch is None:
+        return law_admissible(lam1, lam2, general_law.law_kind, general_law.law_params)
+    return law_admissible(law_stretch[0] * lam1, law_stretch[1] * lam2, general_law.law_kind, general_law.law_params)
 
 
 @njit(**COMPILED_ONLY)

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from snapmem._lazy import njit
 
-from snapmem.dynamics.compiled_assembly import (TANGENT, admissible, assemble, close_network_step, law_with_networks,
-                                                max_step, open_network_step, start_networks, state_ok)
+from snapmem.dynamics.compiled_assembly import (TANGENT, admissible, assemble, close_network_step, max_step,
+                                                membrane_density, open_network_step, start_networks, state_ok)
 from snapmem.kernels.assembly import edge_stretches
 from snapmem.kernels.bordered import band_solve, bordered_solve
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
@@ -68,7 +68,9 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
         if network_step is not None:
             open_network_step(viscous, network_step)
         start_networks(viscous)
-    guess = anchor + h * velocity
+    guess = np.empty(anchor.size)              # anchor + h velocity (loops, not array expressions: numba
+    for i in range(anchor.size):               # compiles each array expression as a function of its own)
+        guess[i] = anchor[i] + h * velocity[i]
     if admissible(guess, P, general_law, linear, balls):
         q = guess.copy()
     else:
@@ -81,7 +83,8 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
     last_step = np.inf
     iterations = cuts = 0
     code = MAX_ITERATIONS
-    dq = np.zeros(q.size)
+    dq = np.empty(q.size)                       # zeros (np.zeros is one more overload to compile)
+    dq[:] = 0.0
     last_at_q = True                            # whether the last assembly was at q (the networks' zeta* is q's)
     for _ in range(max_iterations):
         if converged(norm, tol, floor, last_step, q):
@@ -90,10 +93,13 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
         if not np.isfinite(norm):
             code = NOT_FINITE
             break
+        rhs = np.empty(n)                           # -residual
+        for i in range(n):
+            rhs[i] = -residual[i]
         if balls is None:                           # no bodies (CompiledStep.terms): the band alone
-            dx, ok = band_solve(lower, -residual)
+            dx, ok = band_solve(lower, rhs)
         else:
-            dx, ok = bordered_solve(lower, border, corner, -residual, REFINE_ON_CANCELLATION)
+            dx, ok = bordered_solve(lower, border, corner, rhs, REFINE_ON_CANCELLATION)
         if not ok:
             return q, HANDED_BACK, iterations, cuts, norm
         for i in range(free.size):
@@ -105,7 +111,9 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
         trial = q
         e_t, r_t, lo_t, bo_t, co_t, fl_t, n_t = energy, residual, lower, border, corner, floor, norm
         for _cut in range(max_cuts + 1):
-            trial = q + alpha * dq
+            trial = np.empty(q.size)                # q + alpha dq
+            for i in range(q.size):
+                trial[i] = q[i] + alpha * dq[i]
             inside = state_ok(trial, P, general_law)   # the contacts' gaps: the barriers' energy is inf at a gap <= 0
             if inside:
                 e_t, r_t, lo_t, bo_t, co_t, fl_t = assemble(trial, P, general_law, linear, balls, viscous, pressure,
@@ -129,7 +137,7 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
         code = CONVERGED
     if viscous is not None and not last_at_q:      # the last assembly was a rejected trial: zeta* at q again
         lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
-        law_with_networks(lam1, lam2, P, general_law, viscous)
+        membrane_density(lam1, lam2, P, general_law, viscous, 0.0)
     if viscous is not None and network_step is not None and code == CONVERGED:
         close_network_step(viscous, network_step, P.weight)
     return q, code, iterations, cuts, norm

@@ -132,7 +132,7 @@ def edge_terms(ra, za, rb, zb, inv_length, inv_mid_radius, wt, w1, w2, w11, w12,
 HESSIAN_SLOTS = (0, 5, 2, 7, 5, 3, 8, 4, 2, 8, 1, 6, 7, 4, 6, 3)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12, w22, pressure,
                   band_index, n_band_entries, order):
     """Gradient and band Hessian of the density terms (given their derivatives) plus the pressure work.
@@ -154,8 +154,10 @@ def edge_assembly(q, edges, inv_length, inv_mid_radius, weight, w1, w2, w11, w12
     gradient : (2N,), band : (n_band_entries + 1,), volume : float, largest edge force entry : float
     """
     n_edges = edges.shape[0]
-    gradient = np.zeros(q.size)
-    band = np.zeros(n_band_entries + 1 if order >= 2 else 1)
+    gradient = np.empty(q.size)       # zeros (np.empty and a fill: np.zeros is one more overload to compile)
+    gradient[:] = 0.0
+    band = np.empty(n_band_entries + 1 if order >= 2 else 1)
+    band[:] = 0.0
     volume = 0.0
     force = 0.0                       # largest edge force entry (for the rounding floor)
     distinct = np.empty(9)
@@ -210,7 +212,7 @@ def linear_law_terms(l1, l2, W1, W2):
             W1 * i1_22 + W2 * i2_22)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def linear_law_density(lam1, lam2, W1, W2):
     """W = W1 (I1 - 3) + W2 (I2 - 3) with constant W1, W2 (neo-Hookean, Mooney-Rivlin) and its
     derivatives in (lam1, lam2), in one pass: returns (w, w1, w2, w11, w12, w22), each (E,).
@@ -251,7 +253,7 @@ def edge_kinematics(q, edges, inv_length, inv_mid_radius):
     return ra, za, rb, zb, dr, dz, l, lam1, lam2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def edge_stretches(q, edges, inv_length, inv_mid_radius):
     """(lam1, lam2) of every edge, each (E,): :func:`edge_kinematics`'s stretches alone."""
     n = edges.shape[0]
@@ -277,7 +279,7 @@ def scatter_add(target, index, values):
             target[j] += values[i]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def state_check(q, radius_dofs):
     """-1 if q is finite and every listed radius positive; -2 if q has NaN or inf; else the
     first radius degree of freedom that is not positive (the scene's domain check, one pass)."""
@@ -327,7 +329,7 @@ def _state_check_python(q, radius_dofs):
     return radius_dofs[np.argmax(bad)] if bad.any() else -1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def radius_max_step(q, dq, n_node_dofs, fraction):
     """Largest alpha <= 1 with every positive radius r_i + alpha dr_i above (1 - fraction) r_i."""
     alpha = 1.0

@@ -129,7 +129,7 @@ def _eliminate(F, border, Z, S, rhs):
     return x
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def band_solve(lower, rhs):
     """Solve A x = rhs for the band ``lower`` alone by its LDL^T: (x, ok), ok False for a tangent the
     LDL^T cannot take (as :func:`bordered_solve`, which this is without bodies; its own kernel, so

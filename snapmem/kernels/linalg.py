@@ -18,7 +18,7 @@ import numpy as np
 from snapmem._lazy import njit
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def band_ldlt(lower: np.ndarray, b: int):
     """LDL^T factorisation without pivoting of a symmetric band matrix: factors, inertia, growth.
 
@@ -169,7 +169,7 @@ def _band_ldlt_solve_python(F, x):
     return x
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _ldlt_solve_vector(F, x):
     """:func:`band_ldlt_solve` for one right-hand side (its own loop: faster than the loop over columns)."""
     n, b = F.shape[0], F.shape[1] - 1

@@ -33,7 +33,7 @@ NewtonRules = namedtuple("NewtonRules", "armijo cut stall_factor stall_step resi
 RULES = NewtonRules(ARMIJO, CUT, STALL_FACTOR, STALL_STEP, RESIDUAL_FALL, INERTIA_FLOOR)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def max_abs(x):
     """max |x_i| of a 1D array: 0 if empty, NaN if x has one (as ``np.max(np.abs(x))``, which is
     its Python twin). A loop, because numba's ``np.max`` compiles its generic reduction (0.3 s of
@@ -53,19 +53,19 @@ def _max_abs_numpy(x):
     return float(np.max(np.abs(x))) if x.size else 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def max_norm(r):
     """max |r_i| (0 for an empty r; NaN if r has one): the residual norm both solves converge in."""
     return max_abs(r)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def step_length(alpha, dx):
     """max |alpha dx_i| of an accepted step (0 for an empty dx): what :func:`converged` compares with |q|."""
     return alpha * max_abs(dx)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def converged(norm, tol, floor, last_step, q):
     """Whether max |R| = ``norm`` [N] is converged: at most max(tol, floor) (the tolerance, or the
     residual's rounding floor), or within STALL_FACTOR of that while the last Newton step was at the
@@ -75,13 +75,13 @@ def converged(norm, tol, floor, last_step, q):
     return norm <= floor_tol or (norm <= STALL_FACTOR * floor_tol and last_step <= STALL_STEP * max_abs(q))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def converged_at_end(norm, tol, floor):
     """Whether a solve that stopped (iterations or line search exhausted) is converged all the same."""
     return norm <= max(tol, floor)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def energy_step_accepted(trial_energy, trial_norm, energy, norm, alpha, slope):
     """The 'energy' merit (a minimisation): the trial energy is finite and falls by ARMIJO of the
     step's slope (``slope`` = R . dx, clipped at 0), or its max |R| falls to RESIDUAL_FALL of ``norm``."""
@@ -89,13 +89,13 @@ def energy_step_accepted(trial_energy, trial_norm, energy, norm, alpha, slope):
             and (trial_energy <= energy + ARMIJO * alpha * min(slope, 0.0) or trial_norm <= RESIDUAL_FALL * norm))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def residual_step_accepted(trial_squared, squared, alpha):
     """The 'residual' merit (any equilibrium): |R|^2 finite and fallen by the Armijo fraction."""
     return np.isfinite(trial_squared) and trial_squared <= (1.0 - ARMIJO * alpha) * squared
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def inertia_tolerance(tol, max_inertia, size):
     """A time step's tolerance [N]: ``tol``, kept above the inertia term's rounding floor
     INERTIA_FLOOR max(M / h^2) ``size`` (which grows as h falls)."""
