@@ -33,7 +33,6 @@ import numpy as np
 from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, Viscous,
                                                 assemble_entry, contact_gaps, start_networks)
 from snapmem.dynamics.compiled_measures import frames_measures
-from snapmem.dynamics import precompile
 from snapmem.dynamics.compiled_newton import HANDED_BACK, OUTCOMES, CONVERGED, time_step
 from snapmem.kernels.laws import LAW_LINEAR
 from snapmem.kernels.switch import compiled
@@ -233,8 +232,6 @@ class CompiledStep:
         key = (networks is None, network_step is None)
         entry = self._entries.get(key)
         if entry is None:
-            if precompile.enabled() and not _cached(time_step):       # first use: two processes compile
-                precompile.compile_in_two(args)
             y, code, iterations, cuts, norm = time_step(*args)
             self._entries[key] = _entry_point(time_step, args)
         else:
@@ -249,14 +246,6 @@ class CompiledStep:
                 self.network_step_closed_at = y         # its new state and dissipation are written
         status, reason = OUTCOMES[code]
         return y, NewtonReport(code == CONVERGED, int(iterations), float(norm), reason, int(cuts), status=status)
-
-
-def _cached(kernel) -> bool:
-    """Whether numba's cache holds ``kernel`` (a lazy kernel or its dispatcher), or it has compiled."""
-    from snapmem._numba_cache import in_cache
-    if getattr(kernel, "signatures", None):
-        return True
-    return in_cache(kernel.py_func, kernel.py_func.__qualname__)
 
 
 def _entry_point(kernel, args: tuple):
