@@ -1,18 +1,27 @@
-"""What a recorded frame of the compiled time step needs, for many frames in one compiled call:
-potential energy, volume, and each contact's normal force and smallest gap (what
-``Scene.energy``, ``Scene.volume`` and :func:`snapmem.model.contact.contact_report` give)."""
+"""What a recorded frame of the compiled time step needs, for many frames in one call: potential
+energy, volume, and each contact's normal force and smallest gap (what ``Scene.energy``,
+``Scene.volume`` and :func:`snapmem.model.contact.contact_report` give).
+
+The membrane's part (:func:`frames_membrane`) is its own kernel, which Python calls once a run:
+while numba's cache does not hold it, it runs as its twin (``interpret_uncached``), on all frames
+and edges at once, instead of compiling for ~1 s of a cold ``snapmem simulate`` (issue 17). The
+twin covers a law linear in the invariants (its density has no transcendental function: numpy's
+``np.log`` on arrays rounds differently from numba's in ~1% of values); a scene with another
+law or with contacts runs the compiled :func:`frames_measures_compiled`.
+"""
 
 from __future__ import annotations
 
 import numpy as np
-from snapmem._lazy import njit
+from snapmem._lazy import njit, python_of
 
 from snapmem.dynamics.compiled_assembly import GRADIENT, contact_gaps, membrane_density
-from snapmem.kernels.assembly import edge_stretches, swept_volume
+from snapmem.kernels.assembly import edge_stretches, linear_law_terms, swept_volume
 from snapmem.kernels.contact import ball_edge_barrier, ball_edge_gaps, barrier_force, linear_barrier
+from snapmem.kernels.laws import electric_density
+from snapmem.kernels.linalg import sum_in_order
 
 
-@njit(cache=True, nogil=True)
 def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
     """What a recorded frame needs, for every row q of Q (with its pressure and electric
     coefficient): potential energy [J], volume [m^3], and the total normal force [N] and smallest
@@ -27,11 +36,18 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
     generate its whole call tree (the membrane's fused assembly) a second time at first use, some
     1.5 s of a cold ``snapmem simulate`` (issue 17). The volume is the one edge_assembly sums.
     """
+    if general_law is None and linear is None and balls is None:         # what frames_membrane's twin covers
+        energy, volume = frames_membrane(Q, P, general_law, pressure, a_el)
+        return energy, volume, np.zeros((Q.shape[0], 0)), np.empty((Q.shape[0], 0))
+    return frames_measures_compiled(Q, P, general_law, linear, balls, pressure, a_el)
+
+
+@njit(cache=True, nogil=True, interpret_uncached=True)
+def frames_membrane(Q, P, general_law, pressure, a_el):
+    """The membrane's part of every frame's potential energy (its density's, less pressure times
+    volume) [J] and the volume [m^3], each (T,): :func:`frames_measures` without contacts."""
     T = Q.shape[0]
-    n_lin = 0 if linear is None else linear.lin_axis.size
-    n_contacts = n_lin + (0 if balls is None else balls.ball_radius.size)
     energy, volume = np.empty(T), np.empty(T)
-    forces, gaps = np.zeros((T, n_contacts)), np.empty((T, n_contacts))
     for t in range(T):
         q = Q[t]
         lam1, lam2 = edge_stretches(q, P.edges, P.inv_length, P.inv_mid_radius)
@@ -44,7 +60,42 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
             a, b = P.edges[e, 0], P.edges[e, 1]
             v += swept_volume(q[2 * a], q[2 * b], q[2 * b + 1] - q[2 * a + 1], 1.0)[0]
         volume[t] = v
-        u -= pressure[t] * v
+        energy[t] = u - pressure[t] * v
+    return energy, volume
+
+
+@frames_membrane.python_twin
+def _frames_membrane_python(Q, P, general_law, pressure, a_el):
+    """:func:`frames_membrane` on (frames, edges) arrays for a law linear in the invariants
+    (``general_law`` None): edge_stretches' arithmetic, membrane_density's (the law at the
+    prestretched stretches, the electric term where a_el is not 0), and each frame's sums over
+    its edges in the loop's order (sum_in_order)."""
+    assert general_law is None, "the twin covers LAW_LINEAR (frames_measures)"
+    a, b = P.edges[:, 0], P.edges[:, 1]
+    ra, za, rb, zb = Q[:, 2 * a], Q[:, 2 * a + 1], Q[:, 2 * b], Q[:, 2 * b + 1]
+    dr, dz = rb - ra, zb - za
+    lam1, lam2 = np.sqrt(dr * dr + dz * dz) * P.inv_length, 0.5 * (ra + rb) * P.inv_mid_radius
+    l1, l2 = (lam1, lam2) if P.law_stretch is None else (P.law_stretch[0] * lam1, P.law_stretch[1] * lam2)
+    w = python_of(linear_law_terms)(l1, l2, P.law_params[0], P.law_params[1])[0]
+    electric = a_el != 0.0
+    if electric.any():
+        w[electric] += python_of(electric_density)(lam1[electric], lam2[electric], a_el[electric, None])[0]
+    volume = sum_in_order(python_of(swept_volume)(ra, rb, dz, 1.0)[0].T)
+    return sum_in_order((P.weight * w).T) - pressure * volume, volume
+
+
+@njit(cache=True, nogil=True)
+def frames_measures_compiled(Q, P, general_law, linear, balls, pressure, a_el):
+    """:func:`frames_measures`, compiled: :func:`frames_membrane`, then the contacts' energies (in
+    assemble's order), forces and gaps."""
+    energy, volume = frames_membrane(Q, P, general_law, pressure, a_el)
+    T = Q.shape[0]
+    n_lin = 0 if linear is None else linear.lin_axis.size
+    n_contacts = n_lin + (0 if balls is None else balls.ball_radius.size)
+    forces, gaps = np.zeros((T, n_contacts)), np.empty((T, n_contacts))
+    for t in range(T):
+        q = Q[t]
+        u = energy[t]
         x = q[: P.n_node_dofs].reshape(-1, 2)
         if linear is not None:
             for c in range(n_lin):
