@@ -142,9 +142,8 @@ class Kernel:
 
     def python_twin(self, function):
         """Decorator: ``function`` runs instead of ``py_func`` while the kernel runs as Python. For loop
-        kernels slow as Python: the same floating-point operations in the same order, on Python floats
-        or whole columns, so the kernel's numbers bit for bit (tests/test_python_twins.py); formulas
-        it calls on arrays, through :func:`python_of`."""
+        kernels slow as Python: the same floating-point operations in the same order, on Python floats or
+        whole columns (formulas by :func:`python_of`), the kernel's numbers bit for bit (tests/test_python_twins.py)."""
         self._twin = function
         return function
 
@@ -256,6 +255,7 @@ class _AttachCythonBlas:
 _spent = [0.0]          # seconds in outermost Python-run kernels, this process
 _nesting = threading.local()     # .depth: Python-run kernels open in this thread (only the outermost is timed)
 _seen: dict = {}        # (module, qualname) -> set of argument descriptions, of Python-run kernels
+_pythons: dict = {}     # py_func -> its copy with the kernels it names bound to their Python (python_of)
 _policy = {"compile": os.environ.get("SNAPMEM_COLD", "interpret") == "compile"}
 
 
@@ -313,13 +313,14 @@ def _in_cache(kernel: "Kernel") -> bool:
 
 def _describe(value):
     """An argument's numba type, as plain data: ("a", dtype, ndim, layout, writeable) for an array,
-    ("t", items) for a tuple, ("s", type name) for a Python or numpy scalar."""
+    ("t", items[, module, class]) for a (named) tuple, ("s", type name) for a Python or numpy scalar."""
     import numpy as np
     if isinstance(value, np.ndarray):
         layout = "C" if value.flags.c_contiguous else "F" if value.flags.f_contiguous else "A"
         return ("a", value.dtype.str, value.ndim, layout, bool(value.flags.writeable))
-    if type(value) is tuple:
-        return ("t", tuple(_describe(v) for v in value))
+    if isinstance(value, tuple) and (type(value) is tuple or hasattr(value, "_fields")):
+        named = () if type(value) is tuple else (type(value).__module__, type(value).__qualname__)
+        return ("t", tuple(_describe(v) for v in value), *named)
     if isinstance(value, (bool, int, float, complex, np.generic)) or value is None:
         return ("s", type(value).__module__, type(value).__name__)
     raise TypeError(type(value))
@@ -338,7 +339,9 @@ def _example(description):
         value.flags.writeable = writeable
         return value
     if kind == "t":
-        return tuple(_example(d) for d in description[1])
+        items = tuple(_example(d) for d in description[1])
+        return items if len(description) == 2 else getattr(importlib.import_module(description[2]),
+                                                            description[3])(*items)
     module, name = description[1], description[2]
     if name == "NoneType":
         return None
@@ -472,9 +475,6 @@ def njit(function=None, **options):
     return lambda f: Kernel(f, options)
 
 
-_pythons: dict = {}      # py_func -> its copy with the kernels it names bound to their Python (python_of)
-
-
 def python_of(function):
     """The Python of ``function`` (a Kernel, a dispatcher, a function) with the kernels it names bound
     to their Python (twin or ``py_func``), recursively, and a ``py_func`` (itself): how a twin calls a
@@ -486,10 +486,11 @@ def python_of(function):
         done = _pythons[function] = types.FunctionType(function.__code__, namespace, function.__name__,
                                                        function.__defaults__, function.__closure__)
         done.py_func = done
-        for name in _global_names(function.__code__):          # (a dispatcher: its py_func, not a twin)
-            value = namespace.get(name)
-            if isinstance(value, Kernel) or getattr(getattr(value, "py_func", None), "__module__", "").startswith("snapmem"):
-                namespace[name] = python_of(value)
+        for name in _global_names(function.__code__):
+            value = namespace.get(name)                           # a Kernel, or the dispatcher it made
+            kernel = value if isinstance(value, Kernel) else next((k for k in _made if k._dispatcher is value), None)
+            if kernel is not None:
+                namespace[name] = python_of(kernel)
     return _pythons[function]
 
 

@@ -123,6 +123,16 @@ def test_python_of_binds_the_kernels_a_formula_names_to_their_python():
     assert lazy.python_of(assembly.linear_law_terms) is lazy.python_of(assembly.linear_law_terms).py_func
 
 
+def test_the_background_compile_describes_the_plan_and_its_named_tuples():
+    """frames_membrane's arguments (the Plan, a named tuple) rebuild to the same numba types, so the
+    at-exit compile (compile_jobs) compiles it for the next process."""
+    numba = pytest.importorskip("numba")
+    step, Q, pressure, a_el = frames(*voltage_torus(), count=2)
+    for args in [(Q, step.plan, None, pressure, a_el), (step.plan.weight, np.arange(3), 1.5, (step.plan, None))]:
+        descriptions = [lazy._tupled(json.loads(json.dumps(lazy._plain(lazy._describe(a))))) for a in args]
+        assert [numba.typeof(lazy._example(d)) for d in descriptions] == [numba.typeof(a) for a in args]
+
+
 def test_interpret_uncached_is_snapmems_option_and_the_steps_kernels_always_compile(monkeypatch):
     monkeypatch.setitem(lazy._policy, "compile", False)
     kernel = lazy.njit(cache=True, interpret_uncached=True)(lambda x: x)
