@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # the Kernels (their module names are rebound to numba's dispatchers once they compile)
 FRAMES = measures.frames_membrane
 ARITHMETIC = {name: getattr(arithmetic, name) for name in ("bdf2_anchor", "largest_change", "largest_entry")}
-ALWAYS = (measures.frames_measures_compiled, compiled_newton.time_step)
+ALWAYS = (measures.frames_contacts, compiled_newton.time_step)
 
 
 def compiled(kernel):
@@ -75,36 +75,49 @@ def voltage_torus():                                  # prestretched, voltage of
             lambda k: {"pressure": 0.05 * k, "voltage": 0.0 if k % 3 == 0 else 40.0 * k})
 
 
-@pytest.mark.parametrize("case", [torus_snap, voltage_torus])
+def robot(name, **params):
+    def case():
+        ex = experiment(name, **params)
+        return ex.scene, lambda k: ex.loads(0.05 * ex.t_end * k)
+    case.__name__ = name
+    return case
+
+
+@pytest.mark.parametrize("case", [torus_snap, voltage_torus, robot("gripper_rod", voltage=1000.0), robot("ball_throw")])
 def test_frames_twin_is_the_kernel_bit_for_bit(case):
+    """The membrane's part by the twin and compiled; the contacts' part (compiled) after either."""
     step, Q, pressure, a_el = frames(*case())
-    assert step.terms == (None, None, None)
+    general_law, linear, balls = step.terms
+    assert general_law is None
     if case is voltage_torus:
         assert step.plan.law_stretch is not None and 0.0 in a_el and (a_el != 0.0).any()
     got = FRAMES._twin(Q, step.plan, None, pressure, a_el)
     expected = compiled(FRAMES)(Q, step.plan, None, pressure, a_el)
     for a, b in zip(got, expected):
         assert same(a, b) and a.shape == (len(Q),)
-    whole = measures.frames_measures_compiled(Q, step.plan, *step.terms, pressure, a_el)
     entry = measures.frames_measures(Q, step.plan, *step.terms, pressure, a_el)
-    for a, b in zip(entry, whole):
-        assert same(a, b) and a.shape == b.shape
+    if linear is None and balls is None:
+        assert same(entry[0], expected[0]) and same(entry[1], expected[1]) and entry[2].shape == (len(Q), 0)
+        return
+    energies = got[0].copy(), expected[0].copy()
+    after_twin = measures.frames_contacts(Q, step.plan, linear, balls, energies[0])
+    after_kernel = measures.frames_contacts(Q, step.plan, linear, balls, energies[1])
+    assert same(energies[0], energies[1]) and same(energies[0], entry[0])
+    for a, b, c in zip(after_twin, after_kernel, entry[2:]):
+        assert same(a, b) and same(a, c)
 
 
-def test_a_gent_scene_or_contacts_measure_compiled(monkeypatch):
+def test_a_gent_scenes_frames_compile(monkeypatch):
     """The twin covers the laws linear in the invariants: numpy's log on arrays rounds differently
     from numba's (the C library's) in some 1% of values on this machine's SIMD, so Gent's frames
-    (and a scene's contacts) run the compiled kernel, which gives them their old numbers."""
+    run compiled, with their old numbers."""
     monkeypatch.setattr(FRAMES, "_twin", lambda *args: pytest.fail("the twin ran"))
     gent = build_scene("balloon", ("voltage",), nodes=21, material="gent")
-    for scene, loads in [(gent, lambda k: {"pressure": 0.01 * k, "voltage": 30.0 * k}),
-                         (experiment("gripper_rod").scene, experiment("gripper_rod").loads)]:
-        step, Q, pressure, a_el = frames(scene, loads, count=6)
-        assert step.terms != (None, None, None)
-        entry = measures.frames_measures(Q, step.plan, *step.terms, pressure, a_el)
-        whole = measures.frames_measures_compiled(Q, step.plan, *step.terms, pressure, a_el)
-        for a, b in zip(entry, whole):
-            assert same(a, b)
+    step, Q, pressure, a_el = frames(gent, lambda k: {"pressure": 0.01 * k, "voltage": 30.0 * k}, count=6)
+    assert step.terms[0] is not None and step.terms[1:] == (None, None)
+    entry = measures.frames_measures(Q, step.plan, *step.terms, pressure, a_el)
+    expected = compiled(FRAMES)(Q, step.plan, step.terms[0], pressure, a_el)
+    assert same(entry[0], expected[0]) and same(entry[1], expected[1])
 
 
 def test_python_of_binds_the_kernels_a_formula_names_to_their_python():

@@ -2,12 +2,12 @@
 energy, volume, and each contact's normal force and smallest gap (what ``Scene.energy``,
 ``Scene.volume`` and :func:`snapmem.model.contact.contact_report` give).
 
-The membrane's part (:func:`frames_membrane`) is its own kernel, which Python calls once a run:
-while numba's cache does not hold it, it runs as its twin (``interpret_uncached``), on all frames
-and edges at once, instead of compiling for ~1 s of a cold ``snapmem simulate`` (issue 17). The
-twin covers a law linear in the invariants (its density has no transcendental function: numpy's
-``np.log`` on arrays rounds differently from numba's in ~1% of values); a scene with another
-law or with contacts runs the compiled :func:`frames_measures_compiled`.
+The membrane's part (:func:`frames_membrane`) and the contacts' (:func:`frames_contacts`) are two
+kernels, which Python calls once a run. While numba's cache does not hold it, the membrane's runs
+as its twin (``interpret_uncached``), on all frames and edges at once, instead of compiling for
+~1 s of a cold ``snapmem simulate`` (issue 17). The twin covers the laws linear in the invariants
+(no transcendental function: numpy's ``np.log`` on arrays rounds differently from numba's in ~1%
+of values), so another law's frames compile; the contacts' kernel always compiles.
 """
 
 from __future__ import annotations
@@ -36,10 +36,12 @@ def frames_measures(Q, P, general_law, linear, balls, pressure, a_el):
     generate its whole call tree (the membrane's fused assembly) a second time at first use, some
     1.5 s of a cold ``snapmem simulate`` (issue 17). The volume is the one edge_assembly sums.
     """
-    if general_law is None and linear is None and balls is None:         # what frames_membrane's twin covers
-        energy, volume = frames_membrane(Q, P, general_law, pressure, a_el)
+    membrane = frames_membrane                       # (its twin covers LAW_LINEAR: another law compiles)
+    energy, volume = (membrane if general_law is None else getattr(membrane, "dispatcher", membrane))(
+        Q, P, general_law, pressure, a_el)
+    if linear is None and balls is None:
         return energy, volume, np.zeros((Q.shape[0], 0)), np.empty((Q.shape[0], 0))
-    return frames_measures_compiled(Q, P, general_law, linear, balls, pressure, a_el)
+    return (energy, volume, *frames_contacts(Q, P, linear, balls, energy))
 
 
 @njit(cache=True, nogil=True, interpret_uncached=True)
@@ -70,7 +72,7 @@ def _frames_membrane_python(Q, P, general_law, pressure, a_el):
     (``general_law`` None): edge_stretches' arithmetic, membrane_density's (the law at the
     prestretched stretches, the electric term where a_el is not 0), and each frame's sums over
     its edges in the loop's order (sum_in_order)."""
-    assert general_law is None, "the twin covers LAW_LINEAR (frames_measures)"
+    assert general_law is None, "the twin covers LAW_LINEAR (frames_measures compiles another law)"
     a, b = P.edges[:, 0], P.edges[:, 1]
     ra, za, rb, zb = Q[:, 2 * a], Q[:, 2 * a + 1], Q[:, 2 * b], Q[:, 2 * b + 1]
     dr, dz = rb - ra, zb - za
@@ -85,10 +87,9 @@ def _frames_membrane_python(Q, P, general_law, pressure, a_el):
 
 
 @njit(cache=True, nogil=True)
-def frames_measures_compiled(Q, P, general_law, linear, balls, pressure, a_el):
-    """:func:`frames_measures`, compiled: :func:`frames_membrane`, then the contacts' energies (in
-    assemble's order), forces and gaps."""
-    energy, volume = frames_membrane(Q, P, general_law, pressure, a_el)
+def frames_contacts(Q, P, linear, balls, energy):
+    """The contacts' part of :func:`frames_measures`: their energies added to each frame's
+    ``energy`` (the membrane's, in place, in assemble's order), and their forces and gaps (T, C)."""
     T = Q.shape[0]
     n_lin = 0 if linear is None else linear.lin_axis.size
     n_contacts = n_lin + (0 if balls is None else balls.ball_radius.size)
@@ -124,8 +125,7 @@ def frames_measures_compiled(Q, P, general_law, linear, balls, pressure, a_el):
                 d = ball_edge_gaps(x, P.edges, zc, balls.ball_radius[c])
                 for e in range(d.size):
                     forces[t, n_lin + c] += barrier_force(d[e], balls.ball_dhat[c], balls.ball_coef[c, e])
-        if linear is not None or balls is not None:          # (pruned without contacts: not compiled)
-            smallest = contact_gaps(q, P, linear, balls)
-            for c in range(n_contacts):          # (a loop: row assignment compiles a shape check)
-                gaps[t, c] = smallest[c]
-    return energy, volume, forces, gaps
+        smallest = contact_gaps(q, P, linear, balls)
+        for c in range(n_contacts):              # (a loop: row assignment compiles a shape check)
+            gaps[t, c] = smallest[c]
+    return forces, gaps
