@@ -20,12 +20,9 @@ of three traces). This lasts while the process's time in such kernels stays unde
 :data:`INTERPRET_BUDGET`; past it, the kernels compile. At exit, a detached process compiles the
 kernels that ran as Python, for the argument types they saw, so that the next command loads them
 (:func:`compile_in_background`). The kernels of the compiled time step (``snapmem.dynamics``:
-long loops over steps) always compile. ``SNAPMEM_COLD=compile`` restores compiling at the first
-call; ``SNAPMEM_BACKGROUND_COMPILE=0`` turns off the background compile.
-See docs/performance.md ("First use").
-
-Measured on the 2-core machine (whole process, ``snapmem scenes``): importing numba costs 0.25 s,
-pandas 0.2 s, scipy.optimize with scipy.linalg 0.35 s.
+long loops over steps) always compile, but for those declared ``interpret_uncached`` (:func:`njit`).
+``SNAPMEM_COLD=compile`` restores compiling at the first call; ``SNAPMEM_BACKGROUND_COMPILE=0``
+turns off the background compile. See docs/performance.md ("First use") for what each costs.
 """
 
 from __future__ import annotations
@@ -38,14 +35,16 @@ import threading
 import time
 import types
 
-__all__ = ["Kernel", "function", "module", "njit", "materialized", "interpreted", "compiling", "INTERPRET_BUDGET"]
+__all__ = ["Kernel", "function", "module", "njit", "materialized", "interpreted", "compiling", "python_of",
+           "INTERPRET_BUDGET"]
 
 #: Seconds of Python-run kernels (outermost calls) a process may spend before its uncached kernels
 #: compile instead: about what compiling a command's kernels costs, so that a small problem (a
 #: 101-node trace) never compiles and a big one takes at most about twice as long as compiling at
 #: once would have (figures: docs/performance.md, "First use").
 INTERPRET_BUDGET = float(os.environ.get("SNAPMEM_INTERPRET_BUDGET", "10.0"))
-#: Modules whose kernels always compile (their loops run for thousands of steps).
+#: Modules whose kernels always compile (their loops run for thousands of steps), but for those
+#: declared ``interpret_uncached`` (:func:`njit`).
 ALWAYS_COMPILED = ("snapmem.dynamics.",)
 
 
@@ -108,6 +107,8 @@ class Kernel:
 
     def __init__(self, py_func, options: dict):
         self.py_func = py_func
+        options = dict(options)
+        self.interpret_uncached = bool(options.pop("interpret_uncached", False))
         self.options = options
         self._dispatcher = None
         self._twin = None                   # what runs as Python instead of py_func (:meth:`python_twin`)
@@ -141,8 +142,8 @@ class Kernel:
 
     def python_twin(self, function):
         """Decorator: ``function`` runs instead of ``py_func`` while the kernel runs as Python. For loop
-        kernels slow as Python: the same floating-point operations in the same order, on Python floats
-        or whole columns, so the kernel's numbers bit for bit (tests/test_python_twins.py)."""
+        kernels slow as Python: the same floating-point operations in the same order, on Python floats or
+        whole columns (formulas by :func:`python_of`), the kernel's numbers bit for bit (tests/test_python_twins.py)."""
         self._twin = function
         return function
 
@@ -254,12 +255,13 @@ class _AttachCythonBlas:
 _spent = [0.0]          # seconds in outermost Python-run kernels, this process
 _nesting = threading.local()     # .depth: Python-run kernels open in this thread (only the outermost is timed)
 _seen: dict = {}        # (module, qualname) -> set of argument descriptions, of Python-run kernels
+_pythons: dict = {}     # py_func -> its copy with the kernels it names bound to their Python (python_of)
 _policy = {"compile": os.environ.get("SNAPMEM_COLD", "interpret") == "compile"}
 
 
 def _interpret_when_uncached(kernel: "Kernel") -> bool:
     return (kernel.options.get("cache", False) and not _policy["compile"]
-            and not kernel.__module__.startswith(ALWAYS_COMPILED))
+            and (kernel.interpret_uncached or not kernel.__module__.startswith(ALWAYS_COMPILED)))
 
 
 def _run_as_python(kernel: "Kernel", args):
@@ -311,13 +313,14 @@ def _in_cache(kernel: "Kernel") -> bool:
 
 def _describe(value):
     """An argument's numba type, as plain data: ("a", dtype, ndim, layout, writeable) for an array,
-    ("t", items) for a tuple, ("s", type name) for a Python or numpy scalar."""
+    ("t", items[, module, class]) for a (named) tuple, ("s", type name) for a Python or numpy scalar."""
     import numpy as np
     if isinstance(value, np.ndarray):
         layout = "C" if value.flags.c_contiguous else "F" if value.flags.f_contiguous else "A"
         return ("a", value.dtype.str, value.ndim, layout, bool(value.flags.writeable))
-    if type(value) is tuple:
-        return ("t", tuple(_describe(v) for v in value))
+    if isinstance(value, tuple) and (type(value) is tuple or hasattr(value, "_fields")):
+        named = () if type(value) is tuple else (type(value).__module__, type(value).__qualname__)
+        return ("t", tuple(_describe(v) for v in value), *named)
     if isinstance(value, (bool, int, float, complex, np.generic)) or value is None:
         return ("s", type(value).__module__, type(value).__name__)
     raise TypeError(type(value))
@@ -336,7 +339,9 @@ def _example(description):
         value.flags.writeable = writeable
         return value
     if kind == "t":
-        return tuple(_example(d) for d in description[1])
+        items = tuple(_example(d) for d in description[1])
+        return items if len(description) == 2 else getattr(importlib.import_module(description[2]),
+                                                            description[3])(*items)
     module, name = description[1], description[2]
     if name == "NoneType":
         return None
@@ -462,10 +467,31 @@ def njit(function=None, **options):
     """Drop-in for ``numba.njit`` that defers importing numba to the kernel's first call.
 
     Used as ``@njit(cache=True, nogil=True)`` (or bare ``@njit``). Returns a :class:`Kernel`.
+    snapmem's own option ``interpret_uncached=True``: a kernel of :data:`ALWAYS_COMPILED` that Python
+    calls a few times a command runs as Python while uncached, like any other (give it a fast twin).
     """
     if function is not None:
         return Kernel(function, options)
     return lambda f: Kernel(f, options)
+
+
+def python_of(function):
+    """The Python of ``function`` (a Kernel, a dispatcher, a function) with the kernels it names bound
+    to their Python (twin or ``py_func``), recursively, and a ``py_func`` (itself): how a twin calls a
+    formula on arrays. Those names may be numba dispatchers already (:attr:`Kernel.dispatcher`
+    rebinds them), which would compile for arrays. Module names are read once, at first use."""
+    function = function.python if isinstance(function, Kernel) else getattr(function, "py_func", function)
+    if function not in _pythons:
+        namespace = dict(function.__globals__)
+        done = _pythons[function] = types.FunctionType(function.__code__, namespace, function.__name__,
+                                                       function.__defaults__, function.__closure__)
+        done.py_func = done
+        for name in _global_names(function.__code__):
+            value = namespace.get(name)                           # a Kernel, or the dispatcher it made
+            kernel = value if isinstance(value, Kernel) else next((k for k in _made if k._dispatcher is value), None)
+            if kernel is not None:
+                namespace[name] = python_of(kernel)
+    return _pythons[function]
 
 
 def materialized() -> list[Kernel]:
