@@ -29,11 +29,15 @@ _KERNELS = {kernel.__name__: kernel for kernel in (bdf2_anchor, largest_change, 
 
 
 def _kernel(name: str):
-    """A kernel of snapmem.dynamics.step_arithmetic, compiled (or its Python on the reference path):
-    its numba dispatcher itself, not the lazy stand-in's call in front of it (these kernels always
-    compile, snapmem._lazy.ALWAYS_COMPILED, so the dispatcher is what that call would run)."""
+    """A kernel of snapmem.dynamics.step_arithmetic (its Python on the reference path): once it has
+    compiled or loaded, its numba dispatcher itself, not the lazy stand-in's call in front of it;
+    before, the stand-in, which decides (while numba's cache lacks the kernel it runs as Python,
+    ``interpret_uncached``: a cold ``simulate`` compiles only the time step)."""
     kernel = _KERNELS[name]
-    return getattr(kernel, "dispatcher", kernel) if compiled() else kernel.py_func
+    if not compiled():
+        return kernel.py_func
+    dispatcher = getattr(kernel, "_dispatcher", None)
+    return kernel if dispatcher is None else dispatcher
 
 
 _FLOAT64 = np.dtype(np.float64)
