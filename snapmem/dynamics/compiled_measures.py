@@ -16,7 +16,7 @@ import numpy as np
 from snapmem._lazy import njit, python_of
 
 from snapmem.dynamics.compiled_assembly import GRADIENT, contact_gaps, membrane_density
-from snapmem.kernels.assembly import edge_stretches, linear_law_terms, swept_volume
+from snapmem.kernels.assembly import edge_stretches, linear_law_terms, meridian_stretches, swept_volume
 from snapmem.kernels.contact import ball_edge_barrier, ball_edge_gaps, barrier_force, linear_barrier
 from snapmem.kernels.laws import electric_density
 from snapmem.kernels.linalg import sum_in_order
@@ -75,8 +75,7 @@ def _frames_membrane_python(Q, P, general_law, pressure, a_el):
     assert general_law is None, "the twin covers LAW_LINEAR (frames_measures compiles another law)"
     a, b = P.edges[:, 0], P.edges[:, 1]
     ra, za, rb, zb = Q[:, 2 * a], Q[:, 2 * a + 1], Q[:, 2 * b], Q[:, 2 * b + 1]
-    dr, dz = rb - ra, zb - za
-    lam1, lam2 = np.sqrt(dr * dr + dz * dz) * P.inv_length, 0.5 * (ra + rb) * P.inv_mid_radius
+    _, dz, _, lam1, lam2 = python_of(meridian_stretches)(ra, za, rb, zb, P.inv_length, P.inv_mid_radius)
     l1, l2 = (lam1, lam2) if P.law_stretch is None else (P.law_stretch[0] * lam1, P.law_stretch[1] * lam2)
     w = python_of(linear_law_terms)(l1, l2, P.law_params[0], P.law_params[1])[0]
     electric = a_el != 0.0

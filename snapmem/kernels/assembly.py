@@ -233,6 +233,17 @@ def _linear_law_density_python(lam1, lam2, W1, W2):
     return tuple(np.broadcast_to(x, lam1.shape).copy() for x in linear_law_terms.py_func(lam1, lam2, W1, W2))
 
 
+@njit(cache=True, nogil=True, inline="always")
+def meridian_stretches(ra, za, rb, zb, inv_length, inv_mid_radius):
+    """An edge's (dr, dz, length l, meridional stretch lam1 = l / L, hoop stretch lam2 = (r_a + r_b)
+    / (2 R)), from its end nodes (r_a, z_a), (r_b, z_b) [m] and the reference 1 / L and 1 / R [1/m]:
+    the membrane's kinematics, written once. Scalars in the compiled loops; arrays of edges (or of
+    frames by edges) in numpy code (snapmem.model.kinematics, the frames' measures' twin)."""
+    dr, dz = rb - ra, zb - za
+    l = np.sqrt(dr * dr + dz * dz)
+    return dr, dz, l, l * inv_length, 0.5 * (ra + rb) * inv_mid_radius
+
+
 @njit(cache=True, nogil=True)
 def edge_kinematics(q, edges, inv_length, inv_mid_radius):
     """End coordinates, edge vector, length and stretches of every edge in one pass.
@@ -246,10 +257,8 @@ def edge_kinematics(q, edges, inv_length, inv_mid_radius):
     for e in range(n):
         a, b = edges[e, 0], edges[e, 1]
         ra[e], za[e], rb[e], zb[e] = q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1]
-        dr[e], dz[e] = rb[e] - ra[e], zb[e] - za[e]
-        l[e] = np.sqrt(dr[e] * dr[e] + dz[e] * dz[e])
-        lam1[e] = l[e] * inv_length[e]
-        lam2[e] = 0.5 * (ra[e] + rb[e]) * inv_mid_radius[e]
+        dr[e], dz[e], l[e], lam1[e], lam2[e] = meridian_stretches(ra[e], za[e], rb[e], zb[e], inv_length[e],
+                                                                  inv_mid_radius[e])
     return ra, za, rb, zb, dr, dz, l, lam1, lam2
 
 
@@ -260,9 +269,8 @@ def edge_stretches(q, edges, inv_length, inv_mid_radius):
     lam1, lam2 = np.empty(n), np.empty(n)
     for e in range(n):
         a, b = edges[e, 0], edges[e, 1]
-        dr, dz = q[2 * b] - q[2 * a], q[2 * b + 1] - q[2 * a + 1]
-        lam1[e] = np.sqrt(dr * dr + dz * dz) * inv_length[e]
-        lam2[e] = 0.5 * (q[2 * a] + q[2 * b]) * inv_mid_radius[e]
+        lam1[e], lam2[e] = meridian_stretches(q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1], inv_length[e],
+                                              inv_mid_radius[e])[3:]
     return lam1, lam2
 
 

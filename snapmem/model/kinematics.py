@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from snapmem.kernels.assembly import edge_kinematics
+from snapmem.kernels.assembly import edge_kinematics, meridian_stretches
 from snapmem.kernels.switch import compiled
 from snapmem.model.materials import Density
 from snapmem.model.meridian import Meridian
@@ -58,9 +58,7 @@ class EdgeKinematics:
         a, b = meridian.edges[:, 0], meridian.edges[:, 1]
         r, z = q[0::2], q[1::2]
         ra, za, rb, zb = r[a], z[a], r[b], z[b]
-        dr, dz = rb - ra, zb - za
-        l = np.sqrt(dr * dr + dz * dz)
-        return cls(ra, za, rb, zb, dr, dz, l, l * inv_length, 0.5 * (ra + rb) * inv_mid_radius,
+        return cls(ra, za, rb, zb, *meridian_stretches.py_func(ra, za, rb, zb, inv_length, inv_mid_radius),
                    inv_length, inv_mid_radius)
 
 
