@@ -58,21 +58,23 @@ def band_ldlt(lower: np.ndarray, b: int):
             t = lk * lk * F[k, 0]
             s -= t
             g += abs(t)
-        for i in range(j + 1, min(n, j + b + 1)):
-            scale = max(scale, abs(lower[i - j, j]))
+        last = min(n, j + b + 1)
         if s < 0.0:
             negative += 1
         elif s == 0.0:
             zero += 1
+            for i in range(j + 1, last):          # the column's entries in the scale first (the loop
+                scale = max(scale, abs(lower[i - j, j]))  # below takes them again: max is idempotent)
             s = 1e-300 + 1e-14 * scale
         F[j, 0] = s
         gamma = max(gamma, g + abs(s))
-        for i in range(j + 1, min(n, j + b + 1)):
+        for i in range(j + 1, last):
             t = lower[i - j, j]
+            scale = max(scale, abs(t))
             for k in range(max(0, i - b), j):
                 t -= F[k, i - k] * F[k, j - k] * F[k, 0]
             F[j, i - j] = t / s
-        for m in range(min(b, n - 1 - j) + 1, b + 1):
+        for m in range(last - j, b + 1):
             F[j, m] = 0.0
     return F, negative, zero, gamma / (scale if scale > 0.0 else 1.0)
 
