@@ -110,7 +110,8 @@ def _small_solve(S, g):
 
 @njit(cache=True, nogil=True)
 def _eliminate(F, border, Z, S, rhs):
-    """Block elimination of [[A, B], [B^T, C]] x = rhs with A = L D L^T (factors F), Z = A^-1 B, S the Schur."""
+    """Block elimination of [[A, B], [B^T, C]] x = rhs with A = L D L^T (factors F), Z = A^-1 B (its
+    first k columns), S the Schur."""
     nb, k = F.shape[0], border.shape[0]
     x = rhs.copy()
     _ldlt_solve_vector(F, x[:nb])
@@ -165,30 +166,35 @@ def bordered_solve(lower, border, corner, rhs, refine):
         for a in range(k):
             W[i, a] = border[a, i]
         W[i, k] = rhs[i]
-    band_ldlt_solve(F, W)                             # [Z | y] = A^-1 [B | rhs_band]
-    x = np.empty(nb + k)
-    Z = np.ascontiguousarray(W[:, :k])
-    S = corner.copy()
-    terms = np.abs(corner)
-    g = rhs[nb:].copy()
+    band_ldlt_solve(F, W)                             # [Z | y] = A^-1 [B | rhs_band]; Z is W[:, :k]
+    S = np.empty((k, k))                              # corner - B^T Z, and |corner| + |B^T Z| (loops, not
+    terms = np.empty((k, k))                          # copies and array expressions: each is an allocation)
+    g = np.empty(k)
     for a in range(k):
+        t = rhs[nb + a]
         for i in range(nb):
-            g[a] -= border[a, i] * W[i, k]
+            t -= border[a, i] * W[i, k]
+        g[a] = t
         for b in range(k):
             t = 0.0
             for i in range(nb):
-                t += border[a, i] * Z[i, b]
-            S[a, b] -= t
-            terms[a, b] += abs(t)
+                t += border[a, i] * W[i, b]
+            S[a, b] = corner[a, b] - t
+            terms[a, b] = abs(corner[a, b]) + abs(t)
             if not np.isfinite(S[a, b]):
                 return rhs, False
     if k == 1 and S[0, 0] == 0.0:
         return rhs, False
-    mu = g / S[0, 0] if k == 1 else _small_solve(S, g)
+    if k == 1:
+        mu = g
+        mu[0] = g[0] / S[0, 0]
+    else:
+        mu = _small_solve(S, g)
+    x = np.empty(nb + k)
     for i in range(nb):
         t = W[i, k]
         for a in range(k):
-            t -= Z[i, a] * mu[a]
+            t -= W[i, a] * mu[a]
         x[i] = t
     for a in range(k):                                # (a loop: a slice assignment compiles a shape check)
         x[nb + a] = mu[a]
@@ -205,4 +211,4 @@ def bordered_solve(lower, border, corner, rhs, refine):
             r[nb + a] -= border[a, i] * x[i]
         for b in range(k):
             r[nb + a] -= corner[a, b] * x[nb + b]
-    return x + _eliminate(F, border, Z, S, r), True
+    return x + _eliminate(F, border, W, S, r), True
