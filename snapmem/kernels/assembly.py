@@ -4,7 +4,7 @@ assembly, stretches, scatter, domain checks and the volume gradient. Arrays in, 
 from __future__ import annotations
 
 import numpy as np
-from snapmem._lazy import njit
+from snapmem._lazy import njit, python_of
 from snapmem.kernels.linalg import sum_in_order
 
 _EPS = np.finfo(np.float64).eps
@@ -187,9 +187,9 @@ def _edge_assembly_python(q, edges, inv_length, inv_mid_radius, weight, w1, w2, 
     ``np.add.at``, which adds in the order of its indices (the loop's order)."""
     n_edges = edges.shape[0]
     a, b = edges[:, 0], edges[:, 1]
-    swept, g0, g1, g2, g3, *distinct = edge_terms.py_func(q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1],
-                                                          inv_length, inv_mid_radius, weight, w1, w2, w11, w12,
-                                                          w22, pressure, order >= 2)
+    swept, g0, g1, g2, g3, *distinct = python_of(edge_terms)(q[2 * a], q[2 * a + 1], q[2 * b], q[2 * b + 1],
+                                                             inv_length, inv_mid_radius, weight, w1, w2, w11, w12,
+                                                             w22, pressure, order >= 2)
     gradient = np.zeros(q.size)
     np.add.at(gradient, np.stack([2 * a, 2 * a + 1, 2 * b, 2 * b + 1], axis=1).ravel(),
               np.stack([g0, g1, g2, g3], axis=1).ravel())
@@ -230,7 +230,7 @@ def linear_law_density(lam1, lam2, W1, W2):
 
 @linear_law_density.python_twin
 def _linear_law_density_python(lam1, lam2, W1, W2):
-    return tuple(np.broadcast_to(x, lam1.shape).copy() for x in linear_law_terms.py_func(lam1, lam2, W1, W2))
+    return tuple(np.broadcast_to(x, lam1.shape).copy() for x in python_of(linear_law_terms)(lam1, lam2, W1, W2))
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from snapmem._lazy import python_of
 from snapmem.errors import SnapmemError, check_real
 from snapmem.kernels import viscous as _kernel
 from snapmem.kernels.switch import compiled
@@ -57,7 +58,7 @@ FLOW_METRIC = np.array([[4.0, 2.0], [2.0, 4.0]])
 def network_log_derivatives(e1, e2, mu, jlim=np.inf):
     """W_k and its first and second derivatives in the elastic log strains (e1, e2): (W, f1, f2,
     f11, f12, f22) [Pa], neo-Hookean (``jlim`` inf) or Gent (snapmem.kernels.viscous)."""
-    return _kernel.network_log_derivatives.py_func(e1, e2, mu, jlim)
+    return python_of(_kernel.network_log_derivatives)(e1, e2, mu, jlim)
 
 
 class ViscousNetworks(DensityTerm):
@@ -162,8 +163,8 @@ class ViscousNetworks(DensityTerm):
         start = self._warm if self._warm is not None and self._warm.shape == zeta_hat.shape else zeta_hat
         zeta = np.empty_like(zeta_hat)
         for k, c in enumerate(self._coefficients(h)):
-            z1, z2, ok = _kernel.network_internal.py_func(eps1, eps2, start[k, 0], start[k, 1], zeta_hat[k, 0],
-                                                          zeta_hat[k, 1], self.moduli[k], self.jlims[k], c)
+            z1, z2, ok = python_of(_kernel.network_internal)(eps1, eps2, start[k, 0], start[k, 1], zeta_hat[k, 0],
+                                                             zeta_hat[k, 1], self.moduli[k], self.jlims[k], c)
             if not ok:
                 raise SnapmemError("viscous networks: the local flow-rule solve did not converge in "
                                    f"{_kernel.LOCAL_MAX_ITERATIONS} iterations (stretches out of range?)")
@@ -200,8 +201,8 @@ class ViscousNetworks(DensityTerm):
         total = [0.0 * zero for _ in range(6)]
         for k, c in enumerate(coefficients):
             hat = zeta[k] if zeta_hat is None else zeta_hat[k]
-            parts = _kernel.network_condensed.py_func(eps1, eps2, zeta[k, 0], zeta[k, 1], hat[0], hat[1],
-                                                      self.moduli[k], self.jlims[k], c)
+            parts = python_of(_kernel.network_condensed)(eps1, eps2, zeta[k, 0], zeta[k, 1], hat[0], hat[1],
+                                                         self.moduli[k], self.jlims[k], c)
             total = [t + x for t, x in zip(total, parts)]
         # the networks summed, then log strains -> stretches
         return Density(*_kernel.log_to_stretch.py_func(kin.lam1, kin.lam2, *total))
