@@ -89,6 +89,18 @@ def membrane_density(lam1, lam2, P, general_law, viscous, a_el):
     return mounted_density(lam1, lam2, P.law_params, P.law_stretch, general_law, viscous, a_el)
 
 
+@njit(**INLINED)
+def add_at_edge(e, w, w1, w2, w11, w12, w22, d, d1, d2, d11, d12, d22):
+    """w[e] += d, w1[e] += d1, ...: one edge's part of a further term added to the density's six
+    arrays (the networks', the electric term's). Compiled code only (COMPILED_ONLY)."""
+    w[e] += d
+    w1[e] += d1
+    w2[e] += d2
+    w11[e] += d11
+    w12[e] += d12
+    w22[e] += d22
+
+
 @njit(**COMPILED_ONLY)
 def mounted_density(lam1, lam2, law_params, law_stretch, general_law, viscous, a_el):
     """The membrane's density per edge at the mounted stretches (lam1, lam2): the law's (its
@@ -137,21 +149,11 @@ def mounted_density(lam1, lam2, law_params, law_stretch, general_law, viscous, a
                 t12 += p12
                 t22 += p22
             v0, v1, v2, v11, v12, v22 = log_to_stretch(lam1[e], lam2[e], t0, t1, t2, t11, t12, t22)
-            w[e] += v0
-            w1[e] += v1
-            w2[e] += v2
-            w11[e] += v11
-            w12[e] += v12
-            w22[e] += v22
+            add_at_edge(e, w, w1, w2, w11, w12, w22, v0, v1, v2, v11, v12, v22)
     if a_el != 0.0:
         for e in range(w.size):
             ew, e1, e2, e11, e12, e22 = electric_density(lam1[e], lam2[e], a_el)
-            w[e] += ew
-            w1[e] += e1
-            w2[e] += e2
-            w11[e] += e11
-            w12[e] += e12
-            w22[e] += e22
+            add_at_edge(e, w, w1, w2, w11, w12, w22, ew, e1, e2, e11, e12, e22)
     return w, w1, w2, w11, w12, w22, ok
 
 
