@@ -221,8 +221,9 @@ class CompiledStep:
         network_step = None if open_step is None else self._network_step
         self._network_step = None                     # one solve's
         plain = np.ascontiguousarray        # the arrays as the compiled entry point types them (no copies)
-        key = self._fixed_key               # the run's own arguments: the same objects at every step
-        if key is None or key[0] is not mass or key[1] is not damping or key[2] is not options or key[3:] != (tol, size):
+        fixed = self._fixed_key             # the run's own arguments: the same objects at every step
+        if (fixed is None or fixed[0] is not mass or fixed[1] is not damping or fixed[2] is not options
+                or fixed[3:] != (tol, size)):
             self._fixed_key = (mass, damping, options, tol, size)
             self._fixed_arrays = (plain(mass, dtype=float), plain(damping, dtype=float))
             self._fixed_tail = (float(tol), float(size), int(options.max_iterations), int(options.max_cuts))
