@@ -18,7 +18,7 @@ from pathlib import Path
 
 
 PACKAGE = Path(__file__).resolve().parents[1] / "snapmem"
-LAYERS = {"errors": 0, "threads": 0, "io": 0, "_moved": 0, "_version": 0, "_lazy": 0, "_numba_cache": 0,
+LAYERS = {"errors": 0, "threads": 0, "io": 0, "_moved": 0, "_version": 0, "_lazy": 0, "_numba_cache": 0, "_scipy_blas": 0,
           "kernels": 1, "model": 2, "solvers": 3, "continuation": 4, "dynamics": 4}
 MAX_LINES = 500
 
