@@ -93,6 +93,13 @@ def function(module_name: str, name: str):
 _made: list["Kernel"] = []        # kernels whose dispatcher exists, in the order they were made
 
 
+#: numba options every kernel takes unless it sets its own. error_model='numpy': a float division by
+#: zero gives inf or nan (as on numpy's arrays, so in the Python twins) instead of raising: numba's
+#: default tests every divisor and keeps a branch to raise in each loop (the viscous ball scenes'
+#: step ran ~10% slower, docs/performance.md). Any other division is the same IEEE operation.
+DEFAULT_OPTIONS = {"error_model": "numpy"}
+
+
 class Kernel:
     """A function compiled by numba at its first call (see :func:`njit`), or, while numba's cache
     does not hold it, run as Python (the module's docstring says when).
@@ -102,14 +109,14 @@ class Kernel:
     py_func : callable
         The Python function (numpy on arrays where the kernel is elementwise).
     options : dict
-        The ``numba.njit`` options (``cache``, ``nogil``, ``inline``, ...).
+        The ``numba.njit`` options (``cache``, ``nogil``, ``inline``, ...), over :data:`DEFAULT_OPTIONS`.
     """
 
     def __init__(self, py_func, options: dict):
         self.py_func = py_func
         options = dict(options)
         self.interpret_uncached = bool(options.pop("interpret_uncached", False))
-        self.options = options
+        self.options = {**DEFAULT_OPTIONS, **options}
         self._dispatcher = None
         self._twin = None                   # what runs as Python instead of py_func (:meth:`python_twin`)
         self._interpreted = False           # runs as Python in this process (not in the cache yet)
