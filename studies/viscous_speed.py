@@ -14,7 +14,9 @@ process (this script with ``--worker`` on the tree's snapmem): every repetition 
 viscous on this tree, then elastic and viscous on that one, so the machine's load falls on both
 alike. Real-time factors come from the median wall time (``rtf_*``) and the median CPU time of
 the process (``rtf_*_cpu``: without the time it waited for a core, steadier on a shared machine). The
-table gives the load average (1 min) at each scene's start and end: the machine is shared.
+table gives the load average (1 min) at each scene's start and end: the machine is shared; and
+``reference_ms``, snapmem.bench.machine_reference at the scene's start (a fixed pure-Python loop):
+the machine's own state (about 7 ms fast, 11-12 ms slow), so that runs of different moments compare.
 
 Writes results/viscous_speed.csv.
 
@@ -133,7 +135,9 @@ def measure(name: str, repeats: int, before: Worker | None = None, here: Worker 
     on this tree, so that both trees run in processes alike), ``before``'s interleaved with them."""
     t_end = experiment(name).t_end
     visco = viscous_parameters(name)
+    from snapmem.bench import machine_reference      # here: a worker on an older tree has none
     load_start = os.getloadavg()[0]
+    reference = machine_reference()
     here = _Here() if here is None else here
     traj = timed(name, **visco)[2]                    # loads the compiled kernels; its steps and events
     trees = {"": here} if before is None else {"": here, "_before": before}
@@ -158,7 +162,7 @@ def measure(name: str, repeats: int, before: Worker | None = None, here: Worker 
            "steps_viscous": traj.meta["steps"],
            "newton_viscous": traj.meta["newton_iterations"],
            "event_error_vs_4x_tighter": event_error(traj, tight), "status": traj.meta["status"]}
-    row.update(load_start=load_start, load_end=os.getloadavg()[0])
+    row.update(load_start=load_start, load_end=os.getloadavg()[0], reference_ms=1e3 * reference)
     return row
 
 
