@@ -36,22 +36,6 @@ def interleaved_medians(fns, min_time=0.3, min_repeats=7, max_repeats=2000):
     return [float(np.median(ts)) for ts in times]
 
 
-def machine_reference(repeats: int = 5) -> float:
-    """Median time [s] of a fixed pure-Python loop that no snapmem code enters: how fast the machine
-    runs at this moment. The project's shared 2-core machine has a fast state (about 7 ms here) and
-    a slow one (11-12 ms) that comes for seconds to hours; every timing slows with it (a robot's
-    real-time factor by about 1.5x). Beside a timing, it says which state the timing met, so that
-    runs of different moments compare."""
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        total = 0.0
-        for i in range(200_000):
-            total += i * 0.5
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
-
-
 def newton_floor(nodes: int, scene_name: str = "balloon") -> dict:
     """One Newton iteration (assembly, factorisation, solve: as snapmem.solvers.newton does it) against
     LAPACK's band solve dgbsv of the same matrix (the floor), and against the factorisation and

@@ -15,8 +15,10 @@ viscous on this tree, then elastic and viscous on that one, so the machine's loa
 alike. Real-time factors come from the median wall time (``rtf_*``) and the median CPU time of
 the process (``rtf_*_cpu``: without the time it waited for a core, steadier on a shared machine). The
 table gives the load average (1 min) at each scene's start and end: the machine is shared; and
-``reference_ms``, snapmem.bench.machine_reference at the scene's start (a fixed pure-Python loop):
-the machine's own state (about 7 ms fast, 11-12 ms slow), so that runs of different moments compare.
+``reference_ms``, the median time of :func:`reference_loop` (a fixed pure-Python loop) run by the
+process that timed, right after each of this tree's viscous runs: the machine's own state during
+them (about 7 ms fast, 11-12 ms slow; it changes within seconds), so that runs of different
+moments compare.
 
 Writes results/viscous_speed.csv.
 
@@ -79,6 +81,18 @@ def timed(name, tol_factor=1.0, **params):
     return time.perf_counter() - wall, time.process_time() - cpu, traj
 
 
+def reference_loop() -> float:
+    """Time [s] of a fixed pure-Python loop that no snapmem code enters: how fast the machine runs
+    at this moment. The project's shared 2-core machine has a fast state (about 7 ms here) and a
+    slow one (11-12 ms) that comes for seconds to hours, and every timing slows with it. Taken
+    right after a timed run, in its process (a core idle before it reads slow as it wakes)."""
+    start = time.perf_counter()
+    total = 0.0
+    for i in range(200_000):
+        total += i * 0.5
+    return time.perf_counter() - start
+
+
 def event_error(traj, tight) -> float:
     """Largest relative difference of the run's events from the tighter run's (NaN events must agree)."""
     a, b = events(traj), events(tight)
@@ -102,11 +116,12 @@ class Worker:
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
 
     def timed(self, name: str, viscous: bool) -> tuple:
-        """(wall, CPU time) [s] of one run of scene ``name`` (viscous: with :func:`viscous_parameters`) there."""
+        """(wall, CPU time, :func:`reference_loop` right after) [s] of one run of scene ``name``
+        (viscous: with :func:`viscous_parameters`) there."""
         self.process.stdin.write(json.dumps({"scene": name, "viscous": viscous}) + "\n")
         self.process.stdin.flush()
         answer = json.loads(self.process.stdout.readline())
-        return float(answer["wall"]), float(answer["cpu"])
+        return float(answer["wall"]), float(answer["cpu"]), float(answer["reference"])
 
     def close(self):
         self.process.stdin.close()
@@ -119,7 +134,7 @@ def worker():
         request = json.loads(line)
         params = viscous_parameters(request["scene"]) if request["viscous"] else {}
         wall, cpu, _ = timed(request["scene"], **params)
-        print(json.dumps({"wall": wall, "cpu": cpu}), flush=True)
+        print(json.dumps({"wall": wall, "cpu": cpu, "reference": reference_loop()}), flush=True)
 
 
 class _Here:
@@ -127,7 +142,7 @@ class _Here:
 
     @staticmethod
     def timed(name: str, viscous: bool) -> tuple:
-        return timed(name, **(viscous_parameters(name) if viscous else {}))[:2]
+        return (*timed(name, **(viscous_parameters(name) if viscous else {}))[:2], reference_loop())
 
 
 def measure(name: str, repeats: int, before: Worker | None = None, here: Worker | None = None) -> dict:
@@ -135,9 +150,7 @@ def measure(name: str, repeats: int, before: Worker | None = None, here: Worker 
     on this tree, so that both trees run in processes alike), ``before``'s interleaved with them."""
     t_end = experiment(name).t_end
     visco = viscous_parameters(name)
-    from snapmem.bench import machine_reference      # here: a worker on an older tree has none
     load_start = os.getloadavg()[0]
-    reference = machine_reference()
     here = _Here() if here is None else here
     traj = timed(name, **visco)[2]                    # loads the compiled kernels; its steps and events
     trees = {"": here} if before is None else {"": here, "_before": before}
@@ -147,7 +160,7 @@ def measure(name: str, repeats: int, before: Worker | None = None, here: Worker 
     runs = {f"{kind}{suffix}": [] for suffix in trees for kind in ("elastic", "viscous_compiled")}
     for _ in range(repeats):                          # interleaved: the machine's load falls on all alike
         for suffix, tree in trees.items():
-            runs["elastic" + suffix].append(tree.timed(name, False))
+            runs["elastic" + suffix].append(tree.timed(name, False)[:2])
             runs["viscous_compiled" + suffix].append(tree.timed(name, True))
     with general_path():
         numpy_wall = timed(name, **visco)[0]
@@ -155,13 +168,14 @@ def measure(name: str, repeats: int, before: Worker | None = None, here: Worker 
     factors = {}
     for key, times in runs.items():
         if times:                                     # real-time factors of the median wall and CPU times
-            walls, cpus = np.array(times).T
+            walls, cpus = np.array(times).T[:2]
             factors[f"rtf_{key}"] = t_end / float(np.median(walls))
             factors[f"rtf_{key}_cpu"] = t_end / float(np.median(cpus))
     row = {"scene": name, "t_end_s": t_end, **visco, **factors, "rtf_viscous_general": t_end / numpy_wall,
            "steps_viscous": traj.meta["steps"],
            "newton_viscous": traj.meta["newton_iterations"],
            "event_error_vs_4x_tighter": event_error(traj, tight), "status": traj.meta["status"]}
+    reference = float(np.median([run[2] for run in runs["viscous_compiled"]]))   # this tree's runs' process
     row.update(load_start=load_start, load_end=os.getloadavg()[0], reference_ms=1e3 * reference)
     return row
 
