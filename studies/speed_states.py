@@ -70,12 +70,13 @@ def plot(runs: pd.DataFrame, slow_above: float, path) -> None:
         slow = own["reference_ms"] > slow_above
         top, bottom = grid[0, column], grid[1, column]
         for ax, y in ((top, "real_time_factor"), (bottom, "reference_ms")):
-            ax.plot(own["start_s"][~slow], own[y][~slow], ".", ms=2, color="C0", label="fast state")
-            ax.plot(own["start_s"][slow], own[y][slow], ".", ms=2, color="C3", label="slow state")
+            named = ax is top                              # the states' key once, beside the top row
+            ax.plot(own["start_s"][~slow], own[y][~slow], ".", ms=2, color="C0", label="fast state" if named else None)
+            ax.plot(own["start_s"][slow], own[y][slow], ".", ms=2, color="C3", label="slow state" if named else None)
         top.axhline(100.0, color="k", lw=0.8, ls="--", label="100x real time")
         top.set_title(f"{name}, viscoelastic (single runs)")
         top.set_ylabel("real-time factor [-]")
-        bottom.axhline(slow_above, color="0.4", lw=0.8, ls=":", label="slow above")
+        bottom.axhline(slow_above, color="0.4", lw=0.8, ls=":", label=f"slow above {slow_above:g} ms")
         bottom.set_ylabel("reference loop [ms]")
         bottom.set_xlabel("time since the first run [s]")
     grid[0, -1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, markerscale=4)
