@@ -118,13 +118,14 @@ def frames_contacts(Q, P, linear, balls, energy):
                     i = linear.lin_nodes[k]
                     forces[t, c] += barrier_force(linear.lin_sign[c] * x[i, linear.lin_axis[c]] + linear.lin_offset[c],
                                                   linear.lin_dhat[c], linear.lin_coef[c, i])
+            smallest = contact_gaps(q, P, linear, None)      # the linear ones' (the balls': below)
+            for c in range(n_lin):              # (a loop: row assignment compiles a shape check)
+                gaps[t, c] = smallest[c]
         if balls is not None:
             for c in range(balls.ball_radius.size):
                 zc = q[balls.ball_dof[c]] if balls.ball_dof[c] >= 0 else balls.ball_z0[c]
                 d = ball_edge_gaps(x, P.edges, zc, balls.ball_radius[c])
                 for e in range(d.size):
                     forces[t, n_lin + c] += barrier_force(d[e], balls.ball_dhat[c], balls.ball_coef[c, e])
-        smallest = contact_gaps(q, P, linear, balls)
-        for c in range(n_contacts):              # (a loop: row assignment compiles a shape check)
-            gaps[t, c] = smallest[c]
+                gaps[t, n_lin + c] = np.min(d)      # contact_gaps' number, from these gaps
     return forces, gaps
