@@ -155,8 +155,30 @@ def test_interrupt_inside_a_compiled_kernel_keeps_the_frames():
 
     traj = simulate(ex.scene, ex.loads, 50.0, rho=ex.rho, damping=ex.damping, options=ex.options, progress=progress)
     assert traj.meta["interrupted"] is True and traj.meta["status"].startswith("interrupted at t = ")
+    assert traj.meta["outcome"] == "interrupted"
     assert 3 <= traj.meta["steps"] <= 4 and len(traj["t"]) >= 2
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler          # handlers restored
+
+
+def test_how_a_run_ended_is_a_value():
+    """meta['outcome'] is a RunOutcome word for each way a run ends (meta['status'] stays the
+    sentence), so that callers test a value, not the words of a message."""
+    from snapmem.catalog.robots import experiment
+    from snapmem.dynamics import DynamicsOptions, RunOutcome, simulate
+    ex = experiment("pump", nodes=11)
+
+    def run(t_end, **kw):
+        return simulate(ex.scene, ex.loads, t_end, rho=ex.rho, damping=ex.damping, options=ex.options, **kw).meta
+
+    done = run(0.05)
+    assert done["outcome"] == RunOutcome.completed == "completed" and done["status"] == "completed"
+    assert not done["interrupted"]
+    short = simulate(ex.scene, ex.loads, 50.0, rho=ex.rho, damping=ex.damping,
+                     options=DynamicsOptions(**{**ex.options.__dict__, "max_steps": 3})).meta
+    assert short["outcome"] == "max_steps" and short["steps"] + short["rejected"] == 3
+    assert short["status"].startswith("max_steps = 3 reached") and not short["interrupted"]
+    stopped = run(50.0, stop=lambda t, q, v: t > 0.01)
+    assert stopped["outcome"] == "stopped" and stopped["t_end"] > 0.01 and not stopped["interrupted"]
 
 
 def test_interrupted_trace_writes_the_branch_so_far(tmp_path):

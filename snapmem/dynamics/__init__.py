@@ -16,7 +16,7 @@ from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.schemes import SCHEME_BY_NAME, SCHEMES, Anchor, Scheme
 from snapmem.dynamics.settle import Settled, settle
 from snapmem.dynamics.stepper import EPS
-from snapmem.dynamics.trajectory import Trajectory
+from snapmem.dynamics.trajectory import RunOutcome, Trajectory
 
 __all__ = ["CompiledStep", "DynamicsOptions", "EPS", "PiecewiseLinear", "SCHEMES", "SCHEME_BY_NAME", "Anchor", "Scheme",
-           "Settled", "Trajectory", "lumped_masses", "schedule", "settle", "simulate"]
+           "RunOutcome", "Settled", "Trajectory", "lumped_masses", "schedule", "settle", "simulate"]

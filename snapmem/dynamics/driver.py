@@ -26,7 +26,7 @@ from snapmem.dynamics.schemes import SCHEME_BY_NAME
 from snapmem.kernels.switch import compiled
 from snapmem.dynamics.stepper import _InternalState, _Recorder, _Stepper
 from snapmem.dynamics.supplies import chamber_parts, lumped_masses_of
-from snapmem.dynamics.trajectory import Trajectory
+from snapmem.dynamics.trajectory import RunOutcome, Trajectory
 from snapmem.errors import SolverError, check_real
 from snapmem.io.interrupts import HeldInterrupts
 from snapmem.model.multi import MultiScene
@@ -95,7 +95,9 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     Returns
     -------
     Trajectory
-        ``meta['status']`` is 'completed', or why the run ended early (the step fell below
+        ``meta['outcome']`` says how the run ended, one word of
+        :class:`~snapmem.dynamics.trajectory.RunOutcome` ('completed', 'stopped', 'interrupted',
+        'max_steps', 'dt_min'); ``meta['status']`` is 'completed', or why the run ended early (the step fell below
         ``dt_min``, e.g. where a slack membrane crumples, or ``max_steps``); the frames up to
         there are kept; ``meta['resume']`` continues the run (``resume``). ``meta['interrupted']`` is True when SIGINT (Ctrl-C) or SIGTERM came:
         the signal is taken between two steps (never inside a compiled kernel, where it would
@@ -158,7 +160,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     if resume is not None and resume.get("history") is not None:
         hq, hv, hdt = resume["history"]
         history = (np.array(hq, dtype=float), np.array(hv, dtype=float), float(hdt))
-    status = "completed"
+    status, outcome = "completed", RunOutcome.completed
     scheme = SCHEME_BY_NAME[options.scheme]
     length = scene.meridian.size
     largest_abs = max_abs if compiled() else max_abs.py_func                     # max |q_i|
@@ -169,10 +171,10 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     try:
         while t < t_last:
             if held.received is not None:
-                status = f"interrupted at t = {t:.6g} s"
+                status, outcome = f"interrupted at t = {t:.6g} s", RunOutcome.interrupted
                 break
             if steps + rejected >= options.max_steps:
-                status = f"max_steps = {options.max_steps} reached at t = {t:.6g} s"
+                status, outcome = f"max_steps = {options.max_steps} reached at t = {t:.6g} s", RunOutcome.max_steps
                 break
             dt = min(dt, t_end - t)
             upcoming = [b for b in breaks if t + 1e-12 < b < t + dt] if breaks else None
@@ -192,6 +194,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 log.debug("t = %.6g: Newton failed (%s); dt -> %.3g", t, report.reason, dt)
                 if dt < options.dt_min:
                     status = f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s (Newton: {report.reason})"
+                    outcome = RunOutcome.dt_min
                     break
                 continue
             q_new, v_new = anchor.new_state(y)
@@ -211,6 +214,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                     if dt < options.dt_min:
                         status = (f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
                                   f"(Newton: {report_fallback.reason})")
+                        outcome = RunOutcome.dt_min
                         break
                     continue
                 q_new, v_new = anchor.new_state(y)
@@ -250,7 +254,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
         if isinstance(exc, SystemError) and held.received is None:
             held.__exit__(None, None, None)
             raise                                      # not an interrupt (a second one can land in a kernel)
-        status = f"interrupted at t = {t:.6g} s"
+        status, outcome = f"interrupted at t = {t:.6g} s", RunOutcome.interrupted
     except BaseException:
         held.__exit__(None, None, None)
         internal.finish()
@@ -260,8 +264,8 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
             log.warning("simulation stopped early: %s", status)
             recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True, internal=internal.frame())
         elif stop is not None and t < t_last:
-            status = "stopped by the stop condition"
-        meta = {"scene": scene.name, "status": status, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
+            status, outcome = "stopped by the stop condition", RunOutcome.stopped
+        meta = {"scene": scene.name, "status": status, "outcome": outcome.value, "parameters": scene.parameters, "scheme": options.scheme, "rho": rho,
                 "damping": xi, "steps": steps, "rejected": rejected, "euler_fallbacks": fallbacks, "newton_iterations": iterations, "line_search_cuts": cuts,
                 "wall_time": time.perf_counter() - wall, "t0": t0, "t_end": float(t),
                 "nodes": scene.meridian.nodes, "closed": scene.meridian.closed,
@@ -271,7 +275,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                           "history": None if history is None else list(history), "internal": internal.state()}
         trajectory = recorder.trajectory(meta)
         internal.finish()
-        trajectory.meta["interrupted"] = held.received is not None or status.startswith("interrupted")
+        trajectory.meta["interrupted"] = held.received is not None or outcome is RunOutcome.interrupted
         return trajectory
     finally:
         held.__exit__(None, None, None)

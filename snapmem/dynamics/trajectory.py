@@ -4,8 +4,25 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from enum import Enum
 
 import numpy as np
+
+
+class RunOutcome(str, Enum):
+    """How a simulation ended: ``meta['outcome']`` (the value is the word; ``meta['status']`` says
+    it in a sentence, with the time and the limit)."""
+
+    completed = "completed"            # t_end reached
+    stopped = "stopped"                # the caller's stop condition ended it
+    interrupted = "interrupted"        # SIGINT or SIGTERM, taken between two steps
+    max_steps = "max_steps"            # DynamicsOptions.max_steps reached
+    dt_min = "dt_min"                  # the step fell below DynamicsOptions.dt_min
+
+    def __str__(self) -> str:
+        return self.value
+
+    __format__ = str.__format__
 
 
 @dataclass
@@ -28,7 +45,9 @@ class Trajectory:
         ``dissipation`` [J], the energy its dashpots dissipated since the start; its ``potential``
         includes the networks' stored energy at each frame's internal stretches.
     meta : dict
-        Scene name and parameters, scheme, rho, damping, step and iteration counts, wall time.
+        Scene name and parameters, scheme, rho, damping, step and iteration counts, wall time;
+        ``outcome`` (a :class:`RunOutcome` word) and ``status`` ('completed', or the sentence
+        that says why the run ended early).
     """
 
     data: dict
