@@ -89,6 +89,29 @@ def test_fold_vary_errors_name_the_value_and_what_is_allowed(vary, words, capsys
     assert all(w in err for w in words), err
 
 
+@pytest.mark.parametrize("vary, control", [("E_hat", "voltage"), ("voltage", "E_hat"), ("pressure", "pressure")])
+def test_fold_refuses_to_vary_the_load_its_control_sets(vary, control, capsys):
+    """Failed on 489037c: ``fold --vary E_hat --control voltage`` wrote the same voltage limit for
+    every E_hat (the control overrides the parameter), with no word of it."""
+    assert main(["fold", "balloon", "--vary", f"{vary}=0.05,0.1", "--control", control]) == 2
+    err = capsys.readouterr().err
+    assert f"--vary {vary} with --control {control}" in err and "vary another parameter" in err, err
+
+
+def test_fold_table_names_each_column_once(tmp_path):
+    """Failed on 489037c: varying E_hat under pressure control wrote two E_hat columns (the varied
+    value and the point's measure; pandas read the second back as 'E_hat.1')."""
+    import pandas as pd
+    from snapmem.reference.exact import balloon_limit_point
+    out = tmp_path / "fold.csv"
+    assert main(["fold", "balloon", "--set", "nodes=41", "--vary", "E_hat=0.05,0.1", "--out", str(out)]) == 0
+    table = pd.read_csv(out)
+    assert len(set(table.columns)) == len(table.columns) and "E_hat.1" not in table
+    assert list(table["E_hat"]) == [0.05, 0.1]
+    for e_hat, limit in zip(table["E_hat"], table["pressure_limit"]):
+        assert limit == pytest.approx(balloon_limit_point(E_hat=e_hat)[1], rel=2e-3)
+
+
 def test_vary_and_grid_share_one_parser():
     from snapmem.sweeps.grid import parse_axis
     assert parse_axis("E_hat=0:0.2:3", option="--vary", number=True) == ("E_hat", [0.0, 0.1, 0.2])

@@ -21,3 +21,14 @@ def loads_needed(control: str, *names: str) -> tuple:
     ()
     """
     return ("voltage",) if any(name in VOLTAGE_NAMES for name in (control, *names)) else ()
+
+
+def same_load(control: str, name: str) -> bool:
+    """Whether the parameter ``name`` is the load that ``control`` sweeps (itself, or the voltage
+    in the other unit: 'voltage' and the dimensionless field 'E_hat'): varying it beside that
+    control changes nothing, since the control sets it at every point.
+
+    >>> same_load("voltage", "E_hat"), same_load("pressure", "E_hat")
+    (True, False)
+    """
+    return name == control or (name in VOLTAGE_NAMES and control in VOLTAGE_NAMES)

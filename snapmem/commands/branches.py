@@ -10,7 +10,7 @@ import snapmem._lazy as _lazy
 
 pd = _lazy.module("pandas")  # imported at first use (start-up)
 
-from snapmem.catalog.loads import loads_needed
+from snapmem.catalog.loads import loads_needed, same_load
 from snapmem.catalog.scenes import get_spec
 from snapmem.continuation import CONTROLS
 from snapmem.errors import SnapmemError, SolverError, check_int, check_real
@@ -217,6 +217,10 @@ def cmd_fold(args) -> int:
     params = parse_sets(args.set)
     name, values = parse_axis(args.vary, option="--vary", number=True)
     values = [float(v) for v in values]
+    if same_load(args.control, name):
+        raise SnapmemError(f"--vary {name} with --control {args.control}: the control sets {name} at every point, "
+                           f"so every value would give the same limit; vary another parameter (e.g. E_hat with "
+                           f"--control pressure, or a geometry or material parameter)")
     spec = get_spec(args.scene)
     with_loads = loads_needed(args.control, name)
     spec.resolve(**{**params, name: values[0]})          # unknown names fail before any work
@@ -228,7 +232,7 @@ def cmd_fold(args) -> int:
     display.close()
     if args.points:
         _fold_points(scene_at, values, folds, args, name, params)
-    table = table.rename(columns={"value": name, "limit": f"{args.control}_limit"})
+    table = _named_after(table, name, args.control)
     meta = {"command": "fold", "scene": args.scene, "parameters": params, "vary": name, "control": args.control}
     with OutputSet() as outputs:
         if args.out:
@@ -244,13 +248,20 @@ def cmd_fold(args) -> int:
     return 0
 
 
+def _named_after(table, name: str, control: str):
+    """A fold table's columns as the CSV has them: ``value`` named after the varied parameter,
+    ``limit`` as ``<control>_limit``. A varied load (E_hat, voltage, or pressure beside another
+    control) is also a measure of each point, with the same values: its column once."""
+    return table.drop(columns=[name], errors="ignore").rename(columns={"value": name, "limit": f"{control}_limit"})
+
+
 def _fold_points(scene_at, values, folds, args, name, params) -> None:
     """``fold --points SPECIAL.csv``: the cusps (CP) and turning points (TP) of the fold curve,
     a column named after the varied parameter holding its value."""
     from snapmem.continuation.folds import fold_special_points
     from snapmem.io.results import write_table
     special, iterations = fold_special_points(scene_at, values, folds, args.control)
-    special = special.rename(columns={"value": name, "limit": f"{args.control}_limit"})
+    special = _named_after(special, name, args.control)
     write_table(special, args.points, {"command": "fold --points", "scene": args.scene, "parameters": params,
                                        "vary": name, "control": args.control, "newton_iterations": iterations})
     for _, row in special.iterrows():
