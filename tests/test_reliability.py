@@ -83,12 +83,19 @@ def test_sweep_leaves_a_file_that_is_not_its_journal_byte_for_byte(tmp_path, mon
 
 # ------------------------------------------------------------------------------------------
 # 2. an interrupt keeps the frames so far, wherever it lands; SIGTERM is SIGINT
+def _sigint_as_at_a_terminal():
+    """In the child, before exec: SIGINT's default disposition. A shell starts a background job
+    (``pytest &`` in a script) with SIGINT ignored, every child inherits that, and snapmem keeps
+    an ignored SIGINT ignored (as a sweep's worker needs): Ctrl-C would then never reach it."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start_simulate(out):
     """``snapmem simulate`` on a pseudo-terminal (so that the progress line is drawn at once)."""
     master, slave = pty.openpty()
     run = subprocess.Popen([sys.executable, "-m", "snapmem.cli", "simulate", "pump", "--set", "nodes=41",
                             "--t-end", "1000", "--tol", "1e-7", "--frames", "100000", "--out", str(out)], env=ENV, stdout=subprocess.PIPE,
-                           stderr=slave, text=True)
+                           stderr=slave, text=True, preexec_fn=_sigint_as_at_a_terminal)
     os.close(slave)
     return run, master
 
@@ -140,10 +147,13 @@ def test_interrupted_simulate_saves_the_frames_so_far(tmp_path, sig):
     assert leftovers(tmp_path) == []
 
 
-def test_interrupt_inside_a_compiled_kernel_keeps_the_frames():
+def test_interrupt_inside_a_compiled_kernel_keeps_the_frames(request):
     """The interrupt is taken between steps: a SIGINT raised while the stepper runs ends the run
     with its frames (on ed30f81 the KeyboardInterrupt of a kernel came back as SystemError)."""
     from snapmem.catalog.robots import experiment
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:         # a background job's (see above)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        request.addfinalizer(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     from snapmem.dynamics.driver import simulate
     ex = experiment("pump", nodes=11)
     calls = {"n": 0}
@@ -187,7 +197,8 @@ def test_interrupted_trace_writes_the_branch_so_far(tmp_path):
     master, slave = pty.openpty()
     run = subprocess.Popen([sys.executable, "-m", "snapmem.cli", "trace", "balloon", "--set", "nodes=301",
                             "--until", "stretch=1e6", "--max-steps", "100000", "--out", "b.csv", "--points", "p.csv"],
-                           cwd=tmp_path, env=ENV, stdout=subprocess.PIPE, stderr=slave, text=True)
+                           cwd=tmp_path, env=ENV, stdout=subprocess.PIPE, stderr=slave, text=True,
+                           preexec_fn=_sigint_as_at_a_terminal)
     os.close(slave)
     fifth_step = lambda m: _read_until(m, lambda text: any(int(n) >= 5 for n in re.findall(r"step (\d+) ", text)))
     stdout = _interrupt(run, master, fifth_step, signal.SIGINT)
