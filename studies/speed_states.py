@@ -92,13 +92,14 @@ def plot(runs: pd.DataFrame, slow_above: float, path) -> None:
         named = column == len(names) - 1                  # the key once, beside the last column
         top.plot(elastic["start_s"], elastic["real_time_factor"], ".", ms=2, color="0.65",
                  label="elastic (either state)" if named else None)
+        slow = viscous["reference_ms"] > slow_above
         for ax, y in ((top, "real_time_factor"), (bottom, "reference_ms")):
-            slow = viscous["reference_ms"] > slow_above
             ax.plot(viscous["start_s"][~slow], viscous[y][~slow], ".", ms=2, color="C0",
                     label="viscous, fast state" if named and ax is top else None)
             ax.plot(viscous["start_s"][slow], viscous[y][slow], ".", ms=2, color="C3",
                     label="viscous, slow state" if named and ax is top else None)
         top.axhline(100.0, color="k", lw=0.8, ls="--", label="100x real time" if named else None)
+        top.set_ylim(top=max(top.get_ylim()[1], 105.0))     # the threshold clear of the frame
         top.set_title(f"{name} (single runs)")
         top.set_ylabel("real-time factor [-]")
         bottom.axhline(slow_above, color="0.4", lw=0.8, ls=":", label=f"slow above {slow_above:g} ms" if named else None)
