@@ -222,3 +222,24 @@ def test_an_interrupted_save_leaves_the_previous_file_whole(tmp_path, monkeypatc
     back = Trajectory.load(tmp_path / "traj.npz")
     assert np.array_equal(back["q"], traj["q"]) and back.meta["status"] == "completed"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["traj.npz"]
+
+
+@pytest.mark.parametrize("name", ["euler", "midpoint", "bdf2"])
+@pytest.mark.parametrize("history", [False, True])
+def test_a_schemes_outcome_is_its_new_state_acceleration_and_error_bit_for_bit(name, history):
+    """Scheme.outcome, one compiled pass on a run's arrays, gives what new_state, acceleration and
+    local_error give (and the largest |q_i| of the membrane's entries), to the bit: the driver
+    takes a step's outcome from it. The base class's outcome (those methods composed) agrees too."""
+    from snapmem.dynamics.schemes import SCHEME_BY_NAME, Scheme
+    rng = np.random.default_rng(7)
+    q, v, y, a_prev, q_past, v_past = rng.normal(size=(6, 23))
+    free = np.array([0, 2, 3, 5, 8, 13, 21])
+    anchor = SCHEME_BY_NAME[name].anchor(q, v, 0.2, 0.01, (q_past, v_past, 0.013) if history else None)
+    got = anchor.scheme.outcome(anchor, y, a_prev, free, 20)
+    q_new, v_new = anchor.new_state(y)
+    a_new = anchor.acceleration(v_new)
+    expected = (q_new, v_new, a_new, anchor.scheme.local_error(0.01, a_new, a_prev, free), np.abs(q_new[:20]).max())
+    for a, b in zip(got, expected):
+        assert np.array_equal(a, b)
+    assert Scheme.outcome(anchor.scheme, anchor, y, a_prev, free, 20)[3] == got[3]
+    assert got[3] > 0 and (got[0] is y) == (name != "midpoint")

@@ -23,7 +23,6 @@ import numpy as np
 from snapmem.dynamics.loads import as_schedule, schedule
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.schemes import SCHEME_BY_NAME
-from snapmem.kernels.switch import compiled
 from snapmem.dynamics.stepper import _InternalState, _Recorder, _Stepper
 from snapmem.dynamics.supplies import chamber_parts, lumped_masses_of
 from snapmem.dynamics.trajectory import RunOutcome, Trajectory
@@ -31,7 +30,6 @@ from snapmem.errors import SolverError, check_real
 from snapmem.io.interrupts import HeldInterrupts
 from snapmem.model.multi import MultiScene
 from snapmem.model.scene import Scene
-from snapmem.solvers.rules import max_abs
 from snapmem.threads import single_threaded
 
 # what callers import from here, the schedule and the options' and results' classes included
@@ -163,7 +161,6 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     status, outcome = "completed", RunOutcome.completed
     scheme = SCHEME_BY_NAME[options.scheme]
     length = scene.meridian.size
-    largest_abs = max_abs if compiled() else max_abs.py_func                     # max |q_i|
     breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
     t_last = t_end - 1e-12 * max(1.0, abs(t_end))     # a run ends at t >= t_last (rounding of the steps' sum)
     n_node_dofs = scene.n_node_dofs
@@ -197,7 +194,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                     outcome = RunOutcome.dt_min
                     break
                 continue
-            q_new, v_new = anchor.new_state(y)
+            q_new, v_new, a_new, est, largest = anchor.scheme.outcome(anchor, y, a_prev, free, n_node_dofs)
             fallback = anchor.scheme.fallback
             if fallback is not None and scene.inadmissible(q_new) is not None:
                 # the extrapolation crossed a contact gap (or a lock): take this step by the fallback
@@ -217,15 +214,13 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                         outcome = RunOutcome.dt_min
                         break
                     continue
-                q_new, v_new = anchor.new_state(y)
+                q_new, v_new, a_new, est, largest = anchor.scheme.outcome(anchor, y, a_prev, free, n_node_dofs)
                 report.iterations += report_fallback.iterations
                 fallbacks += 1
-            a_new = anchor.acceleration(v_new)
             order = anchor.scheme.order
             err = 0.0
             if options.adaptive:
-                est = anchor.scheme.local_error(dt, a_new, a_prev, free)
-                size = max(length, float(largest_abs(q_new[:n_node_dofs])))     # grows with the membrane
+                size = max(length, largest)     # grows with the membrane
                 err = est / (options.tol * size)
                 if err > 1.0 and dt > options.dt_min:
                     rejected += 1

@@ -68,3 +68,75 @@ def largest_entry(a, free):
 @largest_entry.python_twin
 def _largest_entry_python(a, free):
     return float(np.max(np.abs(a[free]), initial=-np.inf))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _largest_of_step(a, a_previous, free, relative, y, n_node_dofs):
+    """(max |a - a_previous| (relative) or max |a| over ``free``, max |y_i| over the first
+    ``n_node_dofs``): the two maxima the error control reads, each NaN if an entry is."""
+    change = -np.inf
+    for i in free:
+        d = abs(a[i] - a_previous[i]) if relative else abs(a[i])
+        if d != d:
+            change = d
+            break
+        if d > change:
+            change = d
+    largest = 0.0                                # max_abs (snapmem.solvers.rules) of y[:n_node_dofs]
+    for i in range(n_node_dofs):
+        d = abs(y[i])
+        if d != d:
+            largest = d
+            break
+        if d > largest:
+            largest = d
+    return change, largest
+
+
+@njit(cache=True, nogil=True, interpret_uncached=True)
+def backward_outcome(y, x_hat, v_hat, h, acceleration_step, a_previous, free, relative, n_node_dofs):
+    """A step whose new state is Newton's own (implicit Euler, BDF2), with what the error control
+    reads, in one pass: v_{n+1} = (y - x_hat) / h, a = (v_{n+1} - v_hat) / acceleration_step, and
+    :func:`_largest_of_step` of a and y. Returns (v_{n+1}, a, change, largest)."""
+    v_new, a = np.empty_like(y), np.empty_like(y)
+    for i in range(y.size):
+        v_new[i] = (y[i] - x_hat[i]) / h
+        a[i] = (v_new[i] - v_hat[i]) / acceleration_step
+    change, largest = _largest_of_step(a, a_previous, free, relative, y, n_node_dofs)
+    return v_new, a, change, largest
+
+
+@backward_outcome.python_twin
+def _backward_outcome_python(y, x_hat, v_hat, h, acceleration_step, a_previous, free, relative, n_node_dofs):
+    v_new = (y - x_hat) / h
+    a = (v_new - v_hat) / acceleration_step
+    return (v_new, a, *_largest_of_step_python(a, a_previous, free, relative, y, n_node_dofs))
+
+
+@njit(cache=True, nogil=True, interpret_uncached=True)
+def midpoint_outcome(y, q, v, h, dt, a_previous, free, n_node_dofs):
+    """The implicit midpoint rule's step from its midpoint y, with what the error control reads, in
+    one pass: q_{n+1} = 2 y - q_n, v_{n+1} = 2 (y - q_n) / h - v_n, a = (v_{n+1} - v_n) / dt, and
+    :func:`_largest_of_step` (relative) of a and q_{n+1}. Returns (q_{n+1}, v_{n+1}, a, change, largest)."""
+    q_new, v_new, a = np.empty_like(y), np.empty_like(y), np.empty_like(y)
+    for i in range(y.size):
+        q_new[i] = 2.0 * y[i] - q[i]
+        v_new[i] = 2.0 * (y[i] - q[i]) / h - v[i]
+        a[i] = (v_new[i] - v[i]) / dt
+    change, largest = _largest_of_step(a, a_previous, free, True, q_new, n_node_dofs)
+    return q_new, v_new, a, change, largest
+
+
+@midpoint_outcome.python_twin
+def _midpoint_outcome_python(y, q, v, h, dt, a_previous, free, n_node_dofs):
+    q_new = 2.0 * y - q
+    v_new = 2.0 * (y - q) / h - v
+    a = (v_new - v) / dt
+    return (q_new, v_new, a, *_largest_of_step_python(a, a_previous, free, True, q_new, n_node_dofs))
+
+
+def _largest_of_step_python(a, a_previous, free, relative, y, n_node_dofs):
+    """:func:`_largest_of_step` as numpy (a maximum is exact; NaN propagates)."""
+    d = np.abs(a[free] - a_previous[free]) if relative else np.abs(a[free])
+    head = y[:n_node_dofs]
+    return float(np.max(d, initial=-np.inf)), float(np.max(np.abs(head))) if head.size else 0.0
