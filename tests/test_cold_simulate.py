@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # the Kernels (their module names are rebound to numba's dispatchers once they compile)
 FRAMES = measures.frames_membrane
 ARITHMETIC = {name: getattr(arithmetic, name) for name in ("bdf2_anchor", "largest_change", "largest_entry",
-                                                            "backward_outcome", "midpoint_outcome")}
+                                                            "step_outcome")}
 ALWAYS = (measures.frames_contacts, compiled_newton.time_step)
 
 
@@ -54,14 +54,12 @@ def test_step_arithmetic_twins_are_the_kernels_bit_for_bit(seed):
         assert same(entry._twin(v, free), compiled(entry)(v, free))
         assert type(change._twin(q, qp, free)) is float
         for n_node_dofs in (0, n // 2, n):          # a step's outcome, as the schemes take it
-            backward, midpoint = ARITHMETIC["backward_outcome"], ARITHMETIC["midpoint_outcome"]
-            for relative in (False, True):
-                args = (q, v, qp, 0.25, 0.5, vp, free, relative, n_node_dofs)
-                got, expected = backward._twin(*args), compiled(backward)(*args)
-                assert all(same(a, b) for a, b in zip(got, expected)) and type(got[2]) is float
-            args = (q, v, qp, 0.25, 0.5, vp, free, n_node_dofs)
-            got, expected = midpoint._twin(*args), compiled(midpoint)(*args)
-            assert all(same(a, b) for a, b in zip(got, expected)) and got[0].shape == (n,)
+            outcome = ARITHMETIC["step_outcome"]
+            for kind in (arithmetic.BACKWARD_ABSOLUTE, arithmetic.BACKWARD_RELATIVE, arithmetic.MIDPOINT):
+                args = (kind, q, v, qp, 0.25, 0.5, vp, free, n_node_dofs)
+                got, expected = outcome._twin(*args), compiled(outcome)(*args)
+                assert all(same(a, b) for a, b in zip(got, expected)) and type(got[3]) is float
+                assert got[0].shape == (n,)
 
 
 def frames(scene, loads, count=24, seed=0):

@@ -188,6 +188,34 @@ def test_newton_solve_matches_the_general_path():
     assert np.max(np.abs(y_c - y_p)) <= 1e-12 * s.meridian.size
 
 
+@pytest.mark.parametrize("scheme", ["euler", "midpoint", "bdf2"])
+def test_the_schemes_outcome_computed_in_the_steps_call_is_the_schemes_own(scheme):
+    """Asked for it, the compiled step computes the scheme's outcome of the step (new state,
+    acceleration, error estimate, the membrane's size) in the same call: to the bit what
+    Scheme.outcome gives from the same y, which the stepper then hands out."""
+    from snapmem.dynamics.schemes import SCHEME_BY_NAME
+    ex = experiment("ball_throw", voltage=400.0)
+    s = ex.scene
+    loads = s.resolve_loads(ex.loads(1.0))
+    q, past = perturbed(ex, 1e-4, seed=3), perturbed(ex, 1e-4, seed=5)
+    mass = lumped_masses(s, ex.rho)
+    rng = np.random.default_rng(4)
+    v, v_past, a_prev = (np.zeros_like(q) for _ in range(3))
+    for each in (v, v_past, a_prev):
+        each[s.free[: s.n_band]] = 0.05 * rng.standard_normal(s.n_band)
+    anchor = SCHEME_BY_NAME[scheme].anchor(q, v, 1.0, 1e-3, (past, v_past, 8e-4))
+    stepper = _Stepper(s, mass, ex.damping * mass, ex.options)
+    y, report = stepper.solve(anchor.q, anchor.v, anchor.h, loads, current=anchor.start,
+                              outcome=(*anchor.scheme.compiled_outcome(anchor), a_prev))
+    assert report.converged and stepper.compiled.outcome[0] is y
+    got = stepper.outcome(anchor, y, a_prev, s.free, s.n_node_dofs)
+    expected = anchor.scheme.outcome(anchor, y, a_prev, s.free, s.n_node_dofs)
+    for a, b in zip(got, expected):
+        assert np.array_equal(a, b)
+    assert (got[0] is y) == (scheme != "midpoint") and got[3] > 0.0
+    assert stepper.outcome(anchor, y.copy(), a_prev, s.free, s.n_node_dofs)[3] == got[3]   # the scheme's, then
+
+
 def test_simulation_matches_the_general_path():
     ex = experiment("ball_throw")
 
@@ -239,7 +267,7 @@ def test_a_step_handed_back_runs_on_the_general_path(monkeypatch):
 
     def hand_back(*args):
         calls.append(1)
-        return args[0], HANDED_BACK, 0, 0, np.nan
+        return args[0], HANDED_BACK, 0, 0, np.nan, args[0], args[0], args[0], np.nan, np.nan
 
     monkeypatch.setattr(compiled_step, "time_step", hand_back)
     handed = simulate(ex.scene, ex.loads, 5.0, **kwargs)

@@ -13,6 +13,7 @@ from snapmem._lazy import njit
 
 from snapmem.dynamics.compiled_assembly import (TANGENT, admissible, assemble, close_network_step, max_step,
                                                 membrane_density, open_network_step, start_networks, state_ok)
+from snapmem.dynamics.step_arithmetic import NO_OUTCOME, step_outcome
 from snapmem.kernels.assembly import edge_stretches
 from snapmem.kernels.bordered import band_solve, bordered_solve
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
@@ -38,15 +39,18 @@ OUTCOMES = (
 
 @njit(cache=True, nogil=True)
 def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, linear, balls, viscous, network_step,
-              pressure, a_el, tol, size, max_iterations, max_cuts):
+              pressure, a_el, tol, size, max_iterations, max_cuts, outcome_kind, outcome_step, a_previous):
     """One time step: its inertia M / h^2 + C / h, momentum M v / h and guess anchor + h v (on the
     free degrees of freedom; ``mass``, ``damping`` there), the tolerance kept above the inertia
     term's rounding floor (:func:`snapmem.solvers.rules.inertia_tolerance`), then damped Newton on
     the step's incremental potential: snapmem.solvers.newton.newton with merit='energy' (which
     documents every rule here). ``general_law``, ``linear``, ``balls``, ``viscous``: those terms or None
     (see :mod:`snapmem.dynamics.compiled_assembly`; the networks' local solves start at their
-    anchor, :func:`start_networks`, and zeta*(y) is left in ``viscous.zeta_warm``). Returns (y, code, iterations, cuts, norm), code one
-    of this module's (an index into OUTCOMES, or HANDED_BACK).
+    anchor, :func:`start_networks`, and zeta*(y) is left in ``viscous.zeta_warm``). Returns (y, code, iterations, cuts, norm,
+    *outcome), code one of this module's (an index into OUTCOMES, or HANDED_BACK), and, once
+    converged, the scheme's outcome of the step (snapmem.dynamics.step_arithmetic.step_outcome of
+    ``outcome_kind``, ``outcome_step`` and the last step's acceleration ``a_previous``): (q_{n+1},
+    v_{n+1}, a_{n+1}, change, largest); (y, y, y, NaN, NaN) for NO_OUTCOME or an unconverged solve.
 
     One kernel, not a set-up calling a Newton kernel: numba optimises a kernel together with all
     it calls, so every level of calls is another pass over the whole solve at compile time.
@@ -76,7 +80,7 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
     else:
         q = fallback.copy()
         if not admissible(q, P, general_law, linear, balls):
-            return q, START_OUTSIDE, 0, 0, np.nan
+            return q, START_OUTSIDE, 0, 0, np.nan, q, q, q, np.nan, np.nan
     energy, residual, lower, border, corner, floor = assemble(q, P, general_law, linear, balls, viscous, pressure,
                                                               a_el, inertia, anchor, momentum, TANGENT)
     norm = max_norm(residual)
@@ -101,7 +105,7 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
         else:
             dx, ok = bordered_solve(lower, border, corner, rhs, REFINE_ON_CANCELLATION)
         if not ok:
-            return q, HANDED_BACK, iterations, cuts, norm
+            return q, HANDED_BACK, iterations, cuts, norm, q, q, q, np.nan, np.nan
         for i in range(free.size):
             dq[free[i]] = dx[i]
         alpha = min(1.0, max_step(q, dq, P, linear, balls))
@@ -140,4 +144,8 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
         membrane_density(lam1, lam2, P, general_law, viscous, 0.0)
     if viscous is not None and network_step is not None and code == CONVERGED:
         close_network_step(viscous, network_step, P.weight)
-    return q, code, iterations, cuts, norm
+    if outcome_kind == NO_OUTCOME or code != CONVERGED:
+        return q, code, iterations, cuts, norm, q, q, q, np.nan, np.nan
+    q_new, v_new, a_new, change, largest = step_outcome(outcome_kind, q, anchor, velocity, h, outcome_step, a_previous,
+                                                        free, P.n_node_dofs)
+    return q, code, iterations, cuts, norm, q_new, v_new, a_new, change, largest

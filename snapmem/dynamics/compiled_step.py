@@ -34,6 +34,7 @@ from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, Line
                                                 assemble_entry, contact_gaps, start_networks)
 from snapmem.dynamics.compiled_measures import frames_measures
 from snapmem.dynamics.compiled_newton import HANDED_BACK, OUTCOMES, CONVERGED, time_step
+from snapmem.dynamics.step_arithmetic import MIDPOINT, NO_OUTCOME
 from snapmem.kernels.laws import LAW_LINEAR
 from snapmem.kernels.switch import compiled
 from snapmem.model.contact import contact_names
@@ -85,6 +86,9 @@ class CompiledStep:
         self._fixed_key = None
         self._fixed_arrays = self._fixed_tail = ()
         self._middle = (plan, *terms)
+        # (y, q_{n+1}, v_{n+1}, a_{n+1}, change, largest) of the last solve that was asked for its
+        # scheme's outcome and converged (step_arithmetic.step_outcome), else None
+        self.outcome = None
 
     @classmethod
     def of(cls, scene) -> "CompiledStep | None":
@@ -207,14 +211,18 @@ class CompiledStep:
         gaps = contact_gaps(q, self.plan, *self.terms[1:])
         return float(gaps.min()) if gaps.size else np.inf
 
-    def solve(self, anchor, velocity, h, loads, fallback, mass, damping, tol, size, options):
+    def solve(self, anchor, velocity, h, loads, fallback, mass, damping, tol, size, options, outcome=None):
         """The time step of ``snapmem.dynamics.driver._Stepper.solve`` (which documents it): Newton on the
         incremental potential of step h from (anchor, velocity), with ``mass`` and ``damping`` on
         the free degrees of freedom, from the guess anchor + h velocity (``fallback``, the present
         state, if the guess is outside the domain). (y, NewtonReport), or None to hand the step
         back to the general path. ``mass``, ``damping``, ``tol``, ``size`` and ``options`` are the
         run's: their part of the kernel's arguments is made again only when one of them changes
-        (``mass`` and ``damping`` by identity: not rewritten in place between steps)."""
+        (``mass`` and ``damping`` by identity: not rewritten in place between steps).
+
+        ``outcome``: (kind, step, a_previous) of the scheme's outcome of the step
+        (snapmem.dynamics.step_arithmetic.step_outcome), computed in the same call once Newton has
+        converged and kept as :attr:`outcome` with its y (None: not asked for)."""
         pressure, a_el = self.kernel_loads(loads)
         networks = self._open_networks()
         open_step = None if networks is None else self._viscous_term.open_step
@@ -227,16 +235,20 @@ class CompiledStep:
             self._fixed_key = (mass, damping, options, tol, size)
             self._fixed_arrays = (plain(mass, dtype=float), plain(damping, dtype=float))
             self._fixed_tail = (float(tol), float(size), int(options.max_iterations), int(options.max_cuts))
-        args = ((plain(anchor, dtype=float), plain(velocity, dtype=float), float(h)) + self._fixed_arrays
+        anchor = plain(anchor, dtype=float)
+        kind, step, a_previous = (NO_OUTCOME, 0.0, anchor) if outcome is None else outcome
+        args = ((anchor, plain(velocity, dtype=float), float(h)) + self._fixed_arrays
                 + (plain(fallback, dtype=float),) + self._middle + (networks, network_step, pressure, a_el)
-                + self._fixed_tail)
+                + self._fixed_tail + (kind, float(step), plain(a_previous, dtype=float)))
         key = (networks is None, network_step is None)
         entry = self._entries.get(key)
         if entry is None:
-            y, code, iterations, cuts, norm = time_step(*args)
+            y, code, iterations, cuts, norm, q_new, v_new, a_new, change, largest = time_step(*args)
             self._entries[key] = _entry_point(time_step, args)
         else:
-            y, code, iterations, cuts, norm = entry(*args)
+            y, code, iterations, cuts, norm, q_new, v_new, a_new, change, largest = entry(*args)
+        self.outcome = None if kind == NO_OUTCOME or code != CONVERGED else (
+            y, q_new if kind == MIDPOINT else y, v_new, a_new, change, largest)
         if network_step is not None and networks.zeta_hat is not open_step[1]:
             open_step[1][...] = networks.zeta_hat    # the kernel's anchor (a copy's): the term's
         if code == HANDED_BACK:

@@ -181,7 +181,9 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 dt = t_end - t
             anchor = scheme.anchor(q, v, t, dt, history)
             internal.open(scheme, t, dt, history)
-            y, report = stepper.solve(anchor.q, anchor.v, anchor.h, loads_at(anchor.load_time), current=anchor.start)
+            form = anchor.scheme.compiled_outcome(anchor)
+            y, report = stepper.solve(anchor.q, anchor.v, anchor.h, loads_at(anchor.load_time), current=anchor.start,
+                                      outcome=None if form is None else (*form, a_prev))
             internal.close(y if report.converged else None, dt)
             iterations += report.iterations
             cuts += report.step_cuts
@@ -194,7 +196,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                     outcome = RunOutcome.dt_min
                     break
                 continue
-            q_new, v_new, a_new, est, largest = anchor.scheme.outcome(anchor, y, a_prev, free, n_node_dofs)
+            q_new, v_new, a_new, est, largest = stepper.outcome(anchor, y, a_prev, free, n_node_dofs)
             fallback = anchor.scheme.fallback
             if fallback is not None and scene.inadmissible(q_new) is not None:
                 # the extrapolation crossed a contact gap (or a lock): take this step by the fallback
@@ -214,7 +216,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                         outcome = RunOutcome.dt_min
                         break
                     continue
-                q_new, v_new, a_new, est, largest = anchor.scheme.outcome(anchor, y, a_prev, free, n_node_dofs)
+                q_new, v_new, a_new, est, largest = stepper.outcome(anchor, y, a_prev, free, n_node_dofs)
                 report.iterations += report_fallback.iterations
                 fallbacks += 1
             order = anchor.scheme.order

@@ -22,12 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from snapmem.dynamics.step_arithmetic import (backward_outcome, bdf2_anchor, largest_change, largest_entry,
-                                              midpoint_outcome)
+from snapmem.dynamics.step_arithmetic import (BACKWARD_ABSOLUTE, BACKWARD_RELATIVE, MIDPOINT, bdf2_anchor,
+                                              largest_change, largest_entry, step_outcome)
 from snapmem.kernels.switch import compiled
 
-_KERNELS = {kernel.__name__: kernel for kernel in (bdf2_anchor, largest_change, largest_entry, backward_outcome,
-                                                   midpoint_outcome)}
+_KERNELS = {kernel.__name__: kernel for kernel in (bdf2_anchor, largest_change, largest_entry, step_outcome)}
 
 
 def _kernel(name: str):
@@ -151,28 +150,28 @@ class Scheme:
         (Euler: the largest acceleration) [m/s^2]."""
         return self.error_constant * dt * dt * float(change)
 
+    def compiled_outcome(self, anchor: Anchor) -> tuple | None:
+        """(kind, step) of this scheme's step in snapmem.dynamics.step_arithmetic.step_outcome, the
+        compiled form of :meth:`new_state`, :meth:`acceleration` and :meth:`local_error` together
+        (the compiled time step computes it too); None if the scheme has none."""
+        return None
+
     def outcome(self, anchor: Anchor, y: np.ndarray, a_prev: np.ndarray, free, n_node_dofs: int) -> tuple:
         """Everything a step yields from the solve's solution y: (q_{n+1}, v_{n+1}, a_{n+1}, the local
         error estimate [m], max |q_i| over the first ``n_node_dofs`` entries (the membrane's size)
-        [m]); ``a_prev`` the last step's acceleration. :meth:`new_state`, :meth:`acceleration` and
-        :meth:`local_error`; a scheme with a compiled form of all three overrides it with one
-        call (a step's Python is a few percent of a robot's run)."""
+        [m]); ``a_prev`` the last step's acceleration. One compiled pass (:meth:`compiled_outcome`)
+        on a run's arrays; else :meth:`new_state`, :meth:`acceleration` and :meth:`local_error`."""
+        form = self.compiled_outcome(anchor)
+        if form is not None and _states(y, anchor.q, anchor.v, a_prev) and _indices(free):
+            kind, step = form
+            q_new, v_new, a_new, change, largest = _kernel("step_outcome")(kind, y, anchor.q, anchor.v, anchor.h,
+                                                                           step, a_prev, free, n_node_dofs)
+            return q_new if kind == MIDPOINT else y, v_new, a_new, self.estimate(anchor.dt, change), float(largest)
         q_new, v_new = self.new_state(anchor, y)
         a_new = self.acceleration(anchor, v_new)
         head = q_new[:n_node_dofs]
         return (q_new, v_new, a_new, self.local_error(anchor.dt, a_new, a_prev, free),
                 float(np.max(np.abs(head))) if head.size else 0.0)
-
-    def _backward_outcome(self, anchor, y, a_prev, free, n_node_dofs, acceleration_step, relative) -> tuple:
-        """:meth:`outcome` of a scheme whose new state is y itself and v_{n+1} = (y - x_hat) / h, its
-        acceleration (v_{n+1} - v_hat) / ``acceleration_step``: one compiled pass
-        (step_arithmetic.backward_outcome), the estimate of the largest change of acceleration
-        (``relative``) or of the largest acceleration."""
-        if not (_states(y, anchor.q, anchor.v, a_prev) and _indices(free)):
-            return Scheme.outcome(self, anchor, y, a_prev, free, n_node_dofs)
-        v_new, a_new, change, largest = _kernel("backward_outcome")(y, anchor.q, anchor.v, anchor.h, acceleration_step,
-                                                                    a_prev, free, relative, n_node_dofs)
-        return y, v_new, a_new, self.estimate(anchor.dt, change), float(largest)
 
 
 class ImplicitEuler(Scheme):
@@ -201,8 +200,8 @@ class ImplicitEuler(Scheme):
             change = np.abs(a_new)[free].max()
         return self.estimate(dt, change)
 
-    def outcome(self, anchor, y, a_prev, free, n_node_dofs):
-        return self._backward_outcome(anchor, y, a_prev, free, n_node_dofs, anchor.dt, relative=False)
+    def compiled_outcome(self, anchor):
+        return BACKWARD_ABSOLUTE, anchor.dt
 
 
 class ImplicitMidpoint(Scheme):
@@ -237,13 +236,8 @@ class ImplicitMidpoint(Scheme):
     def rest_coefficients(self, dt, past_dt):
         return float(dt / 2), 1.0, 0.0, 2.0, -1.0, 0.0
 
-    def outcome(self, anchor, y, a_prev, free, n_node_dofs):
-        q, v = anchor.q, anchor.v
-        if not (_states(y, q, v, a_prev) and _indices(free)):
-            return Scheme.outcome(self, anchor, y, a_prev, free, n_node_dofs)
-        q_new, v_new, a_new, change, largest = _kernel("midpoint_outcome")(y, q, v, anchor.h, anchor.dt, a_prev, free,
-                                                                           n_node_dofs)
-        return q_new, v_new, a_new, self.estimate(anchor.dt, change), float(largest)
+    def compiled_outcome(self, anchor):
+        return MIDPOINT, anchor.dt
 
 
 class BDF2(Scheme):
@@ -295,8 +289,8 @@ class BDF2(Scheme):
         """a_{n+1} = (v_{n+1} - v_hat) / h [m/s^2]."""
         return (v_new - anchor.v) / anchor.h
 
-    def outcome(self, anchor, y, a_prev, free, n_node_dofs):
-        return self._backward_outcome(anchor, y, a_prev, free, n_node_dofs, anchor.h, relative=True)
+    def compiled_outcome(self, anchor):
+        return BACKWARD_RELATIVE, anchor.h
 
 
 _EULER = ImplicitEuler()

@@ -93,46 +93,50 @@ def _largest_of_step(a, a_previous, free, relative, y, n_node_dofs):
     return change, largest
 
 
+#: What a step's outcome (:func:`step_outcome`) is, by scheme: a scheme whose new state is Newton's
+#: own with the error of its largest acceleration (implicit Euler) or of its largest change of
+#: acceleration (BDF2), or the implicit midpoint rule's. ``NO_OUTCOME``: the compiled time step
+#: computes none (snapmem.dynamics.compiled_newton.time_step).
+NO_OUTCOME, BACKWARD_ABSOLUTE, BACKWARD_RELATIVE, MIDPOINT = range(4)
+
+
 @njit(cache=True, nogil=True, interpret_uncached=True)
-def backward_outcome(y, x_hat, v_hat, h, acceleration_step, a_previous, free, relative, n_node_dofs):
-    """A step whose new state is Newton's own (implicit Euler, BDF2), with what the error control
-    reads, in one pass: v_{n+1} = (y - x_hat) / h, a = (v_{n+1} - v_hat) / acceleration_step, and
-    :func:`_largest_of_step` of a and y. Returns (v_{n+1}, a, change, largest)."""
+def step_outcome(kind, y, q, v, h, step, a_previous, free, n_node_dofs):
+    """Everything a step yields from its solve's solution y, in one pass, for a scheme of ``kind``:
+    (q_{n+1}, v_{n+1}, a, change, largest), with (q, v) the anchor the solve was taken from (x_hat,
+    v_hat) and h its step [s].
+
+    - backward (Euler, BDF2): q_{n+1} = y, v_{n+1} = (y - x_hat) / h, a = (v_{n+1} - v_hat) / ``step``;
+    - midpoint: q_{n+1} = 2 y - q_n, v_{n+1} = 2 (y - q_n) / h - v_n, a = (v_{n+1} - v_n) / ``step``;
+
+    and :func:`_largest_of_step`: change is max |a - a_previous| over ``free`` (max |a| for
+    BACKWARD_ABSOLUTE), largest max |q_{n+1}| over the first ``n_node_dofs`` entries. The
+    schemes' own formulas (snapmem.dynamics.schemes), loop by loop."""
     v_new, a = np.empty_like(y), np.empty_like(y)
-    for i in range(y.size):
-        v_new[i] = (y[i] - x_hat[i]) / h
-        a[i] = (v_new[i] - v_hat[i]) / acceleration_step
-    change, largest = _largest_of_step(a, a_previous, free, relative, y, n_node_dofs)
-    return v_new, a, change, largest
-
-
-@backward_outcome.python_twin
-def _backward_outcome_python(y, x_hat, v_hat, h, acceleration_step, a_previous, free, relative, n_node_dofs):
-    v_new = (y - x_hat) / h
-    a = (v_new - v_hat) / acceleration_step
-    return (v_new, a, *_largest_of_step_python(a, a_previous, free, relative, y, n_node_dofs))
-
-
-@njit(cache=True, nogil=True, interpret_uncached=True)
-def midpoint_outcome(y, q, v, h, dt, a_previous, free, n_node_dofs):
-    """The implicit midpoint rule's step from its midpoint y, with what the error control reads, in
-    one pass: q_{n+1} = 2 y - q_n, v_{n+1} = 2 (y - q_n) / h - v_n, a = (v_{n+1} - v_n) / dt, and
-    :func:`_largest_of_step` (relative) of a and q_{n+1}. Returns (q_{n+1}, v_{n+1}, a, change, largest)."""
-    q_new, v_new, a = np.empty_like(y), np.empty_like(y), np.empty_like(y)
-    for i in range(y.size):
-        q_new[i] = 2.0 * y[i] - q[i]
-        v_new[i] = 2.0 * (y[i] - q[i]) / h - v[i]
-        a[i] = (v_new[i] - v[i]) / dt
-    change, largest = _largest_of_step(a, a_previous, free, True, q_new, n_node_dofs)
+    if kind == MIDPOINT:
+        q_new = np.empty_like(y)
+        for i in range(y.size):
+            q_new[i] = 2.0 * y[i] - q[i]
+            v_new[i] = 2.0 * (y[i] - q[i]) / h - v[i]
+            a[i] = (v_new[i] - v[i]) / step
+    else:
+        q_new = y
+        for i in range(y.size):
+            v_new[i] = (y[i] - q[i]) / h
+            a[i] = (v_new[i] - v[i]) / step
+    change, largest = _largest_of_step(a, a_previous, free, kind != BACKWARD_ABSOLUTE, q_new, n_node_dofs)
     return q_new, v_new, a, change, largest
 
 
-@midpoint_outcome.python_twin
-def _midpoint_outcome_python(y, q, v, h, dt, a_previous, free, n_node_dofs):
-    q_new = 2.0 * y - q
-    v_new = 2.0 * (y - q) / h - v
-    a = (v_new - v) / dt
-    return (q_new, v_new, a, *_largest_of_step_python(a, a_previous, free, True, q_new, n_node_dofs))
+@step_outcome.python_twin
+def _step_outcome_python(kind, y, q, v, h, step, a_previous, free, n_node_dofs):
+    if kind == MIDPOINT:
+        q_new, v_new = 2.0 * y - q, 2.0 * (y - q) / h - v
+    else:
+        q_new, v_new = y, (y - q) / h
+    a = (v_new - v) / step
+    return (q_new, v_new, a, *_largest_of_step_python(a, a_previous, free, kind != BACKWARD_ABSOLUTE, q_new,
+                                                      n_node_dofs))
 
 
 def _largest_of_step_python(a, a_previous, free, relative, y, n_node_dofs):

@@ -46,14 +46,16 @@ class _Stepper:
         # the whole Newton solve in one compiled call where the scene's terms allow it
         self.compiled = CompiledStep.of(scene) if options.line_search == "energy" else None
 
-    def solve(self, q, v, h, loads, current=None):
+    def solve(self, q, v, h, loads, current=None, outcome=None):
         """y minimising the incremental potential of step h from (q, v); (y, report).
 
         Newton starts from the predictor q + h v if it is admissible, else from ``current`` (the
-        present state, always admissible; default q)."""
+        present state, always admissible; default q). ``outcome``: (kind, step, a_previous) of the
+        scheme's outcome of the step, which the compiled solve computes in the same call
+        (:meth:`outcome` hands it out)."""
         if self.compiled is not None:
             done = self.compiled.solve(q, v, h, loads, q if current is None else current, self._mass_free,
-                                       self._damping_free, self.tol, self._size, self.options.newton)
+                                       self._damping_free, self.tol, self._size, self.options.newton, outcome)
             if done is not None:
                 return done
         scene, free = self.scene, self.free
@@ -77,6 +79,16 @@ class _Stepper:
         solver = functools.partial(newton, merit=self.options.line_search)
         y, _ev, report = solver(assemble, guess, free, tol, self.options.newton, scene.inadmissible, scene.max_step)
         return y, report
+
+
+    def outcome(self, anchor, y, a_prev, free, n_node_dofs) -> tuple:
+        """The step's outcome from the solve's y (``Scheme.outcome``, which documents it): the
+        compiled solve's, if it computed it for this very y, else the scheme's own."""
+        done = getattr(self.compiled, "outcome", None)         # (a chambers' compiled step computes none)
+        if done is not None and done[0] is y:
+            _, q_new, v_new, a_new, change, largest = done
+            return q_new, v_new, a_new, anchor.scheme.estimate(anchor.dt, change), float(largest)
+        return anchor.scheme.outcome(anchor, y, a_prev, free, n_node_dofs)
 
 
 def scheme_coefficients(scheme, t: float, dt: float, past_dt: float | None) -> tuple:

@@ -39,7 +39,7 @@ import numpy as np
 from snapmem.dynamics.compiled_chambers import (TARGET_GAS, TARGET_RESISTANCE, TARGET_VOLUME, ChamberCompiledStep,
                                                 chamber_target)
 from snapmem.dynamics.loads import PiecewiseLinear
-from snapmem.dynamics.stepper import EPS, _Recorder
+from snapmem.dynamics.stepper import EPS, _Recorder, _Stepper
 from snapmem.dynamics.trajectory import Trajectory
 from snapmem.errors import SnapmemError, check_real
 from snapmem.kernels.banded import BorderedMatrix
@@ -261,8 +261,12 @@ class ChamberStepper:
         self._row_scale = scene.force_scale / self._size ** 3
         self.compiled = ChamberCompiledStep.of(scene, chambers.multiplied)
 
-    def solve(self, q, v, h, loads, current=None):
-        """y of the step of h from (q, v) at ``loads``, the chambers' pressures beside it; (y, report)."""
+    outcome = _Stepper.outcome          # the scheme's own (the compiled chambers' step computes none)
+
+    def solve(self, q, v, h, loads, current=None, outcome=None):
+        """y of the step of h from (q, v) at ``loads``, the chambers' pressures beside it; (y, report).
+        (``outcome``: the single membrane's compiled step computes the scheme's outcome in its call;
+        this one leaves it to :meth:`outcome`.)"""
         scene, free, chambers = self.scene, self.free, self.chambers
         n, k, s = scene.n_node_dofs, len(chambers.multiplied), self._row_scale
         inertia_free = self._mass_free / h ** 2 + self._damping_free / h
