@@ -127,16 +127,23 @@ def real_membrane_parameters(voltage_unit="V") -> tuple:
     The failure limits are checked by :mod:`snapmem.model.local_checks` (None: not checked).
     """
     positive = {"minimum": 0.0, "open_min": True}
-    return (Parameter("prestretch", 1.0, "", "equibiaxial prestretch of the mounted membrane (1: stress-free)",
-                      **positive),
-            Parameter("prestretch_1", None, "", "meridional prestretch (default: prestretch)", **positive),
-            Parameter("prestretch_2", None, "", "hoop prestretch (default: prestretch)", **positive),
+    mount = {"minimum": 1.0, "note": _compressed_mount}
+    return (Parameter("prestretch", 1.0, "", "equibiaxial prestretch of the mounted membrane (1: stress-free; "
+                      ">= 1)", **mount),
+            Parameter("prestretch_1", None, "", "meridional prestretch (default: prestretch)", **mount),
+            Parameter("prestretch_2", None, "", "hoop prestretch (default: prestretch)", **mount),
             Parameter("E_breakdown", None, f"{voltage_unit}/m", "breakdown strength of the stress-free "
                       "material (None: no breakdown check)", **positive),
             Parameter("breakdown_exponent", 0.0, "", "k of E_B = E_breakdown (area stretch)^k, area stretch "
                       "from the stress-free state"),
             Parameter("stretch_limit", None, "", "rupture: largest principal stretch from the stress-free "
                       "state (None: no check)", minimum=1.0, open_min=True))
+
+
+def _compressed_mount(value) -> str:
+    """Why a prestretch below 1 is refused (Parameter.note)."""
+    return (" (a prestretch below 1 mounts the membrane compressed in that direction: a membrane has no "
+            "bending stiffness, so it would wrinkle at once, which this model does not represent)")
 
 
 def mounted_law(params: dict, law: Law) -> Law:
