@@ -110,7 +110,7 @@ def test_bordered_solve_against_dense(k):
     corner = corner + corner.T - 50 * np.eye(k)           # an indefinite whole: the Schur is negative
     M = np.block([[A, border.T], [border, corner]])
     rhs = rng.standard_normal(n + k)
-    x, ok = bordered_solve(np.asfortranarray(lower), border, corner, rhs, REFINE_ON_CANCELLATION)
+    x, ok = bordered_solve(lower, border, corner, rhs, REFINE_ON_CANCELLATION)     # C order, as the step's band
     assert ok
     assert np.max(np.abs(x - np.linalg.solve(M, rhs))) <= 1e-12 * np.max(np.abs(x))
 
@@ -121,7 +121,7 @@ def test_band_solve_is_the_bordered_solve_without_bodies():
     from snapmem.kernels.bordered import band_solve
     rng = np.random.default_rng(3)
     n, b = 30, 3
-    lower = np.asfortranarray(np.vstack([10.0 + rng.random(n)] + [rng.standard_normal(n) for _ in range(b)]))
+    lower = np.vstack([10.0 + rng.random(n)] + [rng.standard_normal(n) for _ in range(b)])    # C, as the step's
     rhs = rng.standard_normal(n)
     x, ok = band_solve(lower, rhs)
     y, ok_bordered = bordered_solve(lower, np.zeros((0, n)), np.zeros((0, 0)), rhs, REFINE_ON_CANCELLATION)
