@@ -25,6 +25,7 @@ import numpy as np
 from snapmem.dynamics.step_arithmetic import (BACKWARD_ABSOLUTE, BACKWARD_RELATIVE, MIDPOINT, bdf2_anchor,
                                               largest_change, largest_entry, step_outcome)
 from snapmem.kernels.switch import compiled
+from snapmem.solvers.rules import _max_abs_numpy
 
 _KERNELS = {kernel.__name__: kernel for kernel in (bdf2_anchor, largest_change, largest_entry, step_outcome)}
 
@@ -169,9 +170,8 @@ class Scheme:
             return q_new if kind == MIDPOINT else y, v_new, a_new, self.estimate(anchor.dt, change), float(largest)
         q_new, v_new = self.new_state(anchor, y)
         a_new = self.acceleration(anchor, v_new)
-        head = q_new[:n_node_dofs]
         return (q_new, v_new, a_new, self.local_error(anchor.dt, a_new, a_prev, free),
-                float(np.max(np.abs(head))) if head.size else 0.0)
+                _max_abs_numpy(q_new[:n_node_dofs]))
 
 
 class ImplicitEuler(Scheme):

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 from snapmem._lazy import njit
+from snapmem.solvers.rules import _max_abs_numpy, max_abs
 
 
 @njit(cache=True, nogil=True, interpret_uncached=True)
@@ -70,29 +71,6 @@ def _largest_entry_python(a, free):
     return float(np.max(np.abs(a[free]), initial=-np.inf))
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _largest_of_step(a, a_previous, free, relative, y, n_node_dofs):
-    """(max |a - a_previous| (relative) or max |a| over ``free``, max |y_i| over the first
-    ``n_node_dofs``): the two maxima the error control reads, each NaN if an entry is."""
-    change = -np.inf
-    for i in free:
-        d = abs(a[i] - a_previous[i]) if relative else abs(a[i])
-        if d != d:
-            change = d
-            break
-        if d > change:
-            change = d
-    largest = 0.0                                # max_abs (snapmem.solvers.rules) of y[:n_node_dofs]
-    for i in range(n_node_dofs):
-        d = abs(y[i])
-        if d != d:
-            largest = d
-            break
-        if d > largest:
-            largest = d
-    return change, largest
-
-
 #: What a step's outcome (:func:`step_outcome`) is, by scheme: a scheme whose new state is Newton's
 #: own with the error of its largest acceleration (implicit Euler) or of its largest change of
 #: acceleration (BDF2), or the implicit midpoint rule's. ``NO_OUTCOME``: the compiled time step
@@ -109,9 +87,10 @@ def step_outcome(kind, y, q, v, h, step, a_previous, free, n_node_dofs):
     - backward (Euler, BDF2): q_{n+1} = y, v_{n+1} = (y - x_hat) / h, a = (v_{n+1} - v_hat) / ``step``;
     - midpoint: q_{n+1} = 2 y - q_n, v_{n+1} = 2 (y - q_n) / h - v_n, a = (v_{n+1} - v_n) / ``step``;
 
-    and :func:`_largest_of_step`: change is max |a - a_previous| over ``free`` (max |a| for
-    BACKWARD_ABSOLUTE), largest max |q_{n+1}| over the first ``n_node_dofs`` entries. The
-    schemes' own formulas (snapmem.dynamics.schemes), loop by loop."""
+    and the error control's two maxima: change, :func:`largest_change` of a and a_previous over
+    ``free`` (:func:`largest_entry` of a for BACKWARD_ABSOLUTE), and largest, max |q_{n+1}| over the
+    first ``n_node_dofs`` entries (snapmem.solvers.rules.max_abs). The schemes' own formulas
+    (snapmem.dynamics.schemes), loop by loop."""
     v_new, a = np.empty_like(y), np.empty_like(y)
     if kind == MIDPOINT:
         q_new = np.empty_like(y)
@@ -124,8 +103,8 @@ def step_outcome(kind, y, q, v, h, step, a_previous, free, n_node_dofs):
         for i in range(y.size):
             v_new[i] = (y[i] - q[i]) / h
             a[i] = (v_new[i] - v[i]) / step
-    change, largest = _largest_of_step(a, a_previous, free, kind != BACKWARD_ABSOLUTE, q_new, n_node_dofs)
-    return q_new, v_new, a, change, largest
+    change = largest_entry(a, free) if kind == BACKWARD_ABSOLUTE else largest_change(a, a_previous, free)
+    return q_new, v_new, a, change, max_abs(q_new[:n_node_dofs])
 
 
 @step_outcome.python_twin
@@ -135,12 +114,8 @@ def _step_outcome_python(kind, y, q, v, h, step, a_previous, free, n_node_dofs):
     else:
         q_new, v_new = y, (y - q) / h
     a = (v_new - v) / step
-    return (q_new, v_new, a, *_largest_of_step_python(a, a_previous, free, kind != BACKWARD_ABSOLUTE, q_new,
-                                                      n_node_dofs))
-
-
-def _largest_of_step_python(a, a_previous, free, relative, y, n_node_dofs):
-    """:func:`_largest_of_step` as numpy (a maximum is exact; NaN propagates)."""
-    d = np.abs(a[free] - a_previous[free]) if relative else np.abs(a[free])
-    head = y[:n_node_dofs]
-    return float(np.max(d, initial=-np.inf)), float(np.max(np.abs(head))) if head.size else 0.0
+    if kind == BACKWARD_ABSOLUTE:
+        change = _largest_entry_python(a, free)
+    else:
+        change = _largest_change_python(a, a_previous, free)
+    return q_new, v_new, a, change, _max_abs_numpy(q_new[:n_node_dofs])

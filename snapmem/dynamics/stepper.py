@@ -80,7 +80,6 @@ class _Stepper:
         y, _ev, report = solver(assemble, guess, free, tol, self.options.newton, scene.inadmissible, scene.max_step)
         return y, report
 
-
     def outcome(self, anchor, y, a_prev, free, n_node_dofs) -> tuple:
         """The step's outcome from the solve's y (``Scheme.outcome``, which documents it): the
         compiled solve's, if it computed it for this very y, else the scheme's own."""
