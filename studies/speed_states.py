@@ -84,6 +84,8 @@ def summary(runs: pd.DataFrame, membrane: str, slow_above: float) -> dict:
 def plot(runs: pd.DataFrame, slow_above: float, path) -> None:
     from snapmem.viz.style import axes, save as save_figure
     names = list(dict.fromkeys(runs["scene"]))
+    viscous_slow = runs.loc[runs["membrane"] == "viscous", "reference_ms"] > slow_above
+    seen = {"fast": bool((~viscous_slow).any()), "slow": bool(viscous_slow.any())}    # a state in the key only if run in
     fig, grid = axes(nrows=2, ncols=len(names), squeeze=False, sharex="col")
     for column, name in enumerate(names):
         own = runs[runs["scene"] == name]
@@ -95,9 +97,9 @@ def plot(runs: pd.DataFrame, slow_above: float, path) -> None:
         slow = viscous["reference_ms"] > slow_above
         for ax, y in ((top, "real_time_factor"), (bottom, "reference_ms")):
             ax.plot(viscous["start_s"][~slow], viscous[y][~slow], ".", ms=2, color="C0",
-                    label="viscous, fast state" if named and ax is top else None)
+                    label="viscous, fast state" if named and ax is top and seen["fast"] else None)
             ax.plot(viscous["start_s"][slow], viscous[y][slow], ".", ms=2, color="C3",
-                    label="viscous, slow state" if named and ax is top else None)
+                    label="viscous, slow state" if named and ax is top and seen["slow"] else None)
         top.axhline(100.0, color="k", lw=0.8, ls="--", label="100x real time" if named else None)
         top.set_ylim(top=max(top.get_ylim()[1], 105.0))     # the threshold clear of the frame
         top.set_title(f"{name} (single runs)")
