@@ -2,6 +2,9 @@
 incremental potential, residual and tangent as Scene.evaluate plus inertia, the same Newton
 iterates, the same recorded frames, and the general path wherever a term is not covered."""
 
+import contextlib
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -164,28 +167,49 @@ def test_bordered_solve_hands_back_what_ldlt_cannot_take():
     assert not ok
 
 
-def test_newton_solve_matches_the_general_path():
-    """One time step from a perturbed state, with the inertia of a 1 ms step: same y, iterations, cuts."""
+def _one_step(options, compiled=True):
+    """One time step of ball_throw from a perturbed state, with the inertia of a 1 ms step: (y, report)."""
     ex = experiment("ball_throw", voltage=400.0)
     s = ex.scene
     loads = s.resolve_loads(ex.loads(1.0))
     q = perturbed(ex, 1e-4, seed=3)
     mass = lumped_masses(s, ex.rho)
-    damping = ex.damping * mass
     v = np.zeros_like(q)
     v[s.free[: s.n_band]] = 0.05 * np.random.default_rng(4).standard_normal(s.n_band)
-    stepper = _Stepper(s, mass, damping, ex.options)
-    assert stepper.compiled is not None
-    y_c, rep_c = stepper.solve(q, v, 1e-3, loads)
-    with snapmem.reference_path():
-        stepper = _Stepper(s, mass, damping, ex.options)
-        assert stepper.compiled is None
-        y_p, rep_p = stepper.solve(q, v, 1e-3, loads)
+    with contextlib.ExitStack() as stack:
+        if not compiled:
+            stack.enter_context(snapmem.reference_path())
+        stepper = _Stepper(s, mass, ex.damping * mass, options)
+        assert (stepper.compiled is not None) == compiled
+        return stepper.solve(q, v, 1e-3, loads)
+
+
+@pytest.mark.parametrize("newton_fraction", [0.0, 0.1])
+def test_newton_solve_matches_the_general_path(newton_fraction):
+    """The compiled step and the general one: same y, iterations, cuts, with the residual test
+    alone (newton_fraction 0) and with the increment test as well."""
+    options = dataclasses.replace(experiment("ball_throw").options, newton_fraction=newton_fraction)
+    y_c, rep_c = _one_step(options)
+    y_p, rep_p = _one_step(options, compiled=False)
     assert rep_c.converged and rep_p.converged
     assert rep_c.status == rep_p.status == "converged"
-    assert rep_c.iterations == rep_p.iterations >= 3
+    assert rep_c.iterations == rep_p.iterations >= (3 if newton_fraction == 0.0 else 1)
     assert rep_c.step_cuts == rep_p.step_cuts
-    assert np.max(np.abs(y_c - y_p)) <= 1e-12 * s.meridian.size
+    size = experiment("ball_throw").scene.meridian.size
+    assert np.max(np.abs(y_c - y_p)) <= 1e-12 * size
+
+
+def test_the_increment_test_stops_newton_within_its_tolerance():
+    """With the increment test (newton_fraction 0.1) Newton stops earlier, at a state whose distance
+    from the fully converged one (the residual test alone, to newton.tol) is within the test's
+    tolerance newton_fraction tol L, on the compiled step and the general one alike."""
+    base = experiment("ball_throw").options
+    exact, full = _one_step(dataclasses.replace(base, newton_fraction=0.0))
+    size = experiment("ball_throw").scene.meridian.size
+    for compiled in (True, False):
+        y, report = _one_step(dataclasses.replace(base, newton_fraction=0.1), compiled)
+        assert report.converged and report.iterations < full.iterations
+        assert 0.0 < np.max(np.abs(y - exact)) <= 0.1 * base.tol * size
 
 
 @pytest.mark.parametrize("scheme", ["euler", "midpoint", "bdf2"])

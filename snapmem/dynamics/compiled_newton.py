@@ -17,8 +17,8 @@ from snapmem.dynamics.step_arithmetic import NO_OUTCOME, step_outcome
 from snapmem.kernels.assembly import edge_stretches
 from snapmem.kernels.bordered import band_solve, bordered_solve
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
-from snapmem.solvers.rules import (CUT, converged, converged_at_end, energy_step_accepted, inertia_tolerance, max_norm,
-                                   step_length)
+from snapmem.solvers.rules import (CUT, converged, converged_at_end, energy_step_accepted, increment_error,
+                                   inertia_tolerance, max_norm, moving_increment, step_length)
 from snapmem.solvers.status import Status
 
 #: How a compiled solve ends (an index into OUTCOMES), or HANDED_BACK: a step whose tangent the
@@ -39,7 +39,7 @@ OUTCOMES = (
 
 @njit(cache=True, nogil=True)
 def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, linear, balls, viscous, network_step,
-              pressure, a_el, tol, size, max_iterations, max_cuts, outcome_kind, outcome_step, a_previous):
+              pressure, a_el, tol, size, increment_tol, max_iterations, max_cuts, outcome_kind, outcome_step, a_previous):
     """One time step: its inertia M / h^2 + C / h, momentum M v / h and guess anchor + h v (on the
     free degrees of freedom; ``mass``, ``damping`` there), the tolerance kept above the inertia
     term's rounding floor (:func:`snapmem.solvers.rules.inertia_tolerance`), then damped Newton on
@@ -90,6 +90,7 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
     dq = np.empty(q.size)                       # zeros (np.zeros is one more overload to compile)
     dq[:] = 0.0
     last_at_q = True                            # whether the last assembly was at q (the networks' zeta* is q's)
+    rate, previous = 1.0, np.inf                # the increment test's contraction rate and last full step
     for _ in range(max_iterations):
         if converged(norm, tol, floor, last_step, q):
             code = CONVERGED
@@ -137,6 +138,16 @@ def time_step(anchor, velocity, h, mass, damping, fallback, P, general_law, line
         norm = n_t
         last_at_q = True
         last_step = step_length(alpha, dx)
+        if increment_tol > 0.0:
+            if alpha == 1.0:
+                increment = moving_increment(dx, mass)
+                rate, error = increment_error(increment, previous, rate)
+                previous = increment
+                if error <= increment_tol:
+                    code = CONVERGED
+                    break
+            else:
+                previous = np.inf
     if code != CONVERGED and converged_at_end(norm, tol, floor):
         code = CONVERGED
     if viscous is not None and not last_at_q:      # the last assembly was a rejected trial: zeta* at q again

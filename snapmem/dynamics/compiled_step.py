@@ -211,13 +211,14 @@ class CompiledStep:
         gaps = contact_gaps(q, self.plan, *self.terms[1:])
         return float(gaps.min()) if gaps.size else np.inf
 
-    def solve(self, anchor, velocity, h, loads, fallback, mass, damping, tol, size, options, outcome=None):
+    def solve(self, anchor, velocity, h, loads, fallback, mass, damping, tol, size, options, outcome=None,
+              increment_tol=0.0):
         """The time step of ``snapmem.dynamics.driver._Stepper.solve`` (which documents it): Newton on the
         incremental potential of step h from (anchor, velocity), with ``mass`` and ``damping`` on
         the free degrees of freedom, from the guess anchor + h velocity (``fallback``, the present
         state, if the guess is outside the domain). (y, NewtonReport), or None to hand the step
-        back to the general path. ``mass``, ``damping``, ``tol``, ``size`` and ``options`` are the
-        run's: their part of the kernel's arguments is made again only when one of them changes
+        back to the general path. ``mass``, ``damping``, ``tol``, ``size``, ``options`` and
+        ``increment_tol`` (the Newton increment test's, snapmem.solvers.newton.newton's) are the run's: their part of the kernel's arguments is made again only when one of them changes
         (``mass`` and ``damping`` by identity: not rewritten in place between steps).
 
         ``outcome``: (kind, step, a_previous) of the scheme's outcome of the step
@@ -231,10 +232,11 @@ class CompiledStep:
         plain = np.ascontiguousarray        # the arrays as the compiled entry point types them (no copies)
         fixed = self._fixed_key             # the run's own arguments: the same objects at every step
         if (fixed is None or fixed[0] is not mass or fixed[1] is not damping or fixed[2] is not options
-                or fixed[3:] != (tol, size)):
-            self._fixed_key = (mass, damping, options, tol, size)
+                or fixed[3:] != (tol, size, increment_tol)):
+            self._fixed_key = (mass, damping, options, tol, size, increment_tol)
             self._fixed_arrays = (plain(mass, dtype=float), plain(damping, dtype=float))
-            self._fixed_tail = (float(tol), float(size), int(options.max_iterations), int(options.max_cuts))
+            self._fixed_tail = (float(tol), float(size), float(increment_tol), int(options.max_iterations),
+                                int(options.max_cuts))
         anchor = plain(anchor, dtype=float)
         kind, step, a_previous = (NO_OUTCOME, 0.0, anchor) if outcome is None else outcome
         args = ((anchor, plain(velocity, dtype=float), float(h)) + self._fixed_arrays

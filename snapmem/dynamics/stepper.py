@@ -43,6 +43,9 @@ class _Stepper:
         self.tol = options.newton.tol * scene.force_scale
         self._mass_free, self._damping_free = mass[self.free], damping[self.free]
         self._size = scene.meridian.size
+        # Newton's increment test: its error within newton_fraction of the smallest error tolerance
+        # a step can have (tol times the reference size; the driver's is tol max(L, max |q|))
+        self.increment_tol = options.newton_fraction * options.tol * self._size if options.adaptive else 0.0
         # the whole Newton solve in one compiled call where the scene's terms allow it
         self.compiled = CompiledStep.of(scene) if options.line_search == "energy" else None
 
@@ -55,7 +58,8 @@ class _Stepper:
         (:meth:`outcome` hands it out)."""
         if self.compiled is not None:
             done = self.compiled.solve(q, v, h, loads, q if current is None else current, self._mass_free,
-                                       self._damping_free, self.tol, self._size, self.options.newton, outcome)
+                                       self._damping_free, self.tol, self._size, self.options.newton, outcome,
+                                       self.increment_tol)
             if done is not None:
                 return done
         scene, free = self.scene, self.free
@@ -76,7 +80,8 @@ class _Stepper:
         tol = max(self.tol, 1e3 * EPS * float(inertia_free.max()) * self._size)
         if scene.inadmissible(guess) is not None:
             guess = q if current is None else current
-        solver = functools.partial(newton, merit=self.options.line_search)
+        solver = functools.partial(newton, merit=self.options.line_search, increment_tol=self.increment_tol,
+                                   mass=self._mass_free)
         y, _ev, report = solver(assemble, guess, free, tol, self.options.newton, scene.inadmissible, scene.max_step)
         return y, report
 

@@ -87,7 +87,8 @@ class NewtonReport:
 def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.ndarray, free: np.ndarray,
            tol: float, options: NewtonOptions = NewtonOptions(),
            inadmissible: Callable[[np.ndarray], str | None] = lambda q: None,
-           max_step: Callable[[np.ndarray, np.ndarray], float] = lambda q, dq: 1.0, merit: str = "residual"):
+           max_step: Callable[[np.ndarray, np.ndarray], float] = lambda q, dq: 1.0, merit: str = "residual",
+           increment_tol: float = 0.0, mass: np.ndarray | None = None):
     """Solve R(q) = 0 on the free degrees of freedom by damped Newton.
 
     Parameters
@@ -105,6 +106,10 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
         not); 'energy', for a minimisation (a time step's incremental potential): when it lowers
         the energy by the Armijo fraction of its slope, or halves max |R| (far fewer cuts: full
         Newton steps in strongly nonlinear states often raise |R|^2 while lowering the energy).
+    increment_tol : float
+        A time step's increment test [m]: converged also when a full Newton step's
+        :func:`snapmem.solvers.rules.increment_error` (over the band positions where ``mass``, one
+        per band position, is positive) is at most this. 0 (default): max |R| alone decides.
 
     Returns
     -------
@@ -124,6 +129,7 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
     norm = rules.max_norm(ev.residual)
     last_step = np.inf
     report = NewtonReport(False, 0, norm, "max iterations", status=Status.max_iterations)
+    rate, previous = 1.0, np.inf                # the increment test's contraction rate and last full step
     for _ in range(options.max_iterations):
         report.history.append(norm)
         if rules.converged(norm, tol, ev.residual_floor, last_step, q):
@@ -168,6 +174,17 @@ def newton(residual_and_jacobian: Callable[[np.ndarray], Evaluation], q0: np.nda
         q, ev = trial, ev_trial
         norm = rules.max_norm(ev.residual)
         last_step = rules.step_length(alpha, dx)
+        if increment_tol > 0.0:
+            if alpha == 1.0:
+                increment = rules.moving_increment(dx, mass)
+                rate, error = rules.increment_error(increment, previous, rate)
+                previous = increment
+                if error <= increment_tol:
+                    report.history.append(norm)
+                    report.converged, report.reason, report.status = True, "converged", Status.converged
+                    break
+            else:
+                previous = np.inf
     report.residual_norm = norm
     if not report.converged and rules.converged_at_end(norm, tol, ev.residual_floor):
         report.converged, report.reason, report.status = True, "converged", Status.converged

@@ -28,9 +28,13 @@ RESIDUAL_FALL = 0.5
 #: The inertia term's rounding floor, STALL_FACTOR eps max(M / h^2) |q|: a time step's tolerance stays above it.
 INERTIA_FLOOR = 1e3 * float(np.finfo(np.float64).eps)
 
-NewtonRules = namedtuple("NewtonRules", "armijo cut stall_factor stall_step residual_fall inertia_floor")
+#: A time step's Newton increment test: the estimate of Newton's contraction rate falls by at most
+#: this factor per iteration (CVODE's CRDOWN), so that one lucky small step does not end a solve.
+RATE_FALL = 0.3
+
+NewtonRules = namedtuple("NewtonRules", "armijo cut stall_factor stall_step residual_fall inertia_floor rate_fall")
 #: The constants above, together.
-RULES = NewtonRules(ARMIJO, CUT, STALL_FACTOR, STALL_STEP, RESIDUAL_FALL, INERTIA_FLOOR)
+RULES = NewtonRules(ARMIJO, CUT, STALL_FACTOR, STALL_STEP, RESIDUAL_FALL, INERTIA_FLOOR, RATE_FALL)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -73,6 +77,41 @@ def converged(norm, tol, floor, last_step, q):
     steps far larger than that)."""
     floor_tol = max(tol, floor)
     return norm <= floor_tol or (norm <= STALL_FACTOR * floor_tol and last_step <= STALL_STEP * max_abs(q))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def moving_increment(dx, mass):
+    """max |dx_i| over the band positions that have mass (a time step's coordinates [m]; a
+    constraint's multiplier has none), NaN if one is: the increment :func:`increment_error` judges."""
+    largest = 0.0
+    for i in range(dx.size):
+        if mass[i] > 0.0:
+            a = abs(dx[i])
+            if a != a:
+                return a
+            if a > largest:
+                largest = a
+    return largest
+
+
+@njit(cache=True, nogil=True, inline="always")
+def increment_error(increment, previous, rate):
+    """A time step's Newton error left after a full Newton step of ``increment`` (its
+    :func:`moving_increment` [m]), ``previous`` the full step's before it (inf: none since the
+    start or a damped step) and ``rate`` the contraction rate's estimate so far (1 at the start).
+
+    Returns (rate, error): the rate's estimate max(RATE_FALL rate, increment / previous) (CVODE's)
+    and the error's, the sum of the steps still to come were they to shrink at that rate,
+    rate / (1 - rate) increment (Hairer & Wanner, Solving ODEs II, IV.8); inf after a first
+    full step (no rate yet) or at a rate of 1 or more (not contracting). A time step converges
+    when it is at most the fraction ``newton_fraction`` of the step's error tolerance: solving
+    the step's equations far below its truncation error buys nothing."""
+    if previous == np.inf:
+        return rate, np.inf
+    rate = max(RATE_FALL * rate, increment / previous)
+    if rate >= 1.0:
+        return rate, np.inf
+    return rate, rate / (1.0 - rate) * increment
 
 
 @njit(cache=True, nogil=True, inline="always")
