@@ -218,7 +218,8 @@ class CompiledStep:
         the free degrees of freedom, from the guess anchor + h velocity (``fallback``, the present
         state, if the guess is outside the domain). (y, NewtonReport), or None to hand the step
         back to the general path. ``mass``, ``damping``, ``tol``, ``size``, ``options`` and
-        ``increment_tol`` (the Newton increment test's, snapmem.solvers.newton.newton's) are the run's: their part of the kernel's arguments is made again only when one of them changes
+        ``increment_tol`` (the Newton increment test's, snapmem.solvers.newton.newton's) are the
+        run's: their part of the kernel's arguments is made again only when one of them changes
         (``mass`` and ``damping`` by identity: not rewritten in place between steps).
 
         ``outcome``: (kind, step, a_previous) of the scheme's outcome of the step

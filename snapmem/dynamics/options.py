@@ -33,8 +33,8 @@ class DynamicsOptions:
         25 iterations and at most 10 step halvings per iteration (statics allow 30): a time step
         whose Newton needs more is cut instead, which is cheaper (docs/performance.md).
     newton_fraction : float
-        With ``adaptive``, a step's Newton also ends once the error it leaves (its last full
-        step times the contraction rate's estimate, :func:`snapmem.solvers.rules.increment_error`)
+        With ``adaptive``, a step's Newton also ends once the error it leaves (the steps still to
+        come at the estimated contraction rate, :func:`snapmem.solvers.rules.increment_error`)
         is at most this fraction of the step's error tolerance ``tol`` L (default 0.1, CVODE's
         choice): the time step's own error is larger, and solving its equations further changes
         nothing it reports. 0: the residual test alone (the tolerance ``newton.tol``), as before
