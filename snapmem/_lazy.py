@@ -35,8 +35,8 @@ import threading
 import time
 import types
 
-__all__ = ["Kernel", "function", "module", "njit", "materialized", "interpreted", "compiling", "python_of",
-           "INTERPRET_BUDGET"]
+__all__ = ["Kernel", "function", "module", "njit", "inlined", "materialized", "interpreted", "compiling",
+           "python_of", "INTERPRET_BUDGET"]
 
 #: Seconds of Python-run kernels (outermost calls) a process may spend before its uncached kernels
 #: compile instead: about what compiling a command's kernels costs, so that a small problem (a
@@ -177,6 +177,16 @@ class Kernel:
             return _run_as_python(self, args)
         return self.dispatcher(*args)
 
+    def ready(self, args) -> bool:
+        """For a kernel whose caller has a Python way of its own (the compiled run's loop, whose
+        Python is the driver's): whether to call it now, i.e. its dispatcher is made, numba's
+        cache holds it or kernels compile at first call (``SNAPMEM_COLD=compile``). Else False,
+        and it compiles for ``args`` in the background at exit, as a kernel run as Python does."""
+        if self._dispatcher is not None or _policy["compile"] or not self.options.get("cache") or _in_cache(self):
+            return True
+        _note_for_background(self, args)
+        return False
+
     def __repr__(self) -> str:
         state = "dispatcher made" if self._dispatcher is not None else "not compiled yet"
         return f"<compiled kernel {self.__module__}.{self.__qualname__} ({state})>"
@@ -206,10 +216,8 @@ def _interpret_when_uncached(kernel: "Kernel") -> bool:
             and (kernel.interpret_uncached or not kernel.__module__.startswith(ALWAYS_COMPILED)))
 
 
-def _run_as_python(kernel: "Kernel", args):
-    depth = getattr(_nesting, "depth", 0)
-    if depth:
-        return kernel.python(*args)
+def _note_for_background(kernel: "Kernel", args) -> None:
+    """Remember ``kernel``'s argument types, to compile it for them at exit (compile_in_background)."""
     key = (kernel.__module__, kernel.__qualname__)
     if key not in _seen:
         _seen[key] = set()
@@ -219,6 +227,13 @@ def _run_as_python(kernel: "Kernel", args):
         _seen[key].add(tuple(_describe(a) for a in args))
     except TypeError:
         pass                                  # an argument we cannot describe: not compiled ahead
+
+
+def _run_as_python(kernel: "Kernel", args):
+    depth = getattr(_nesting, "depth", 0)
+    if depth:
+        return kernel.python(*args)
+    _note_for_background(kernel, args)
     import numpy as np
     _nesting.depth = depth + 1
     start = time.perf_counter()
@@ -415,6 +430,15 @@ def njit(function=None, **options):
     if function is not None:
         return Kernel(function, options)
     return lambda f: Kernel(f, options)
+
+
+def inlined(function):
+    """A compiled-code copy of the plain Python ``function``: numba inlines it into the kernels that
+    call it (it is no kernel of its own), while Python keeps calling ``function`` itself, at no
+    dispatch cost. For the scalar formulas a compiled loop and its Python twin both take, so
+    that each is written once (snapmem.dynamics: the schemes' and the step control's)."""
+    return Kernel(function, {"cache": True, "nogil": True, "no_cpython_wrapper": True, "no_cfunc_wrapper": True,
+                             "inline": "always"})
 
 
 def python_of(function):

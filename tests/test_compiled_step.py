@@ -11,6 +11,7 @@ import pytest
 import snapmem
 import snapmem.dynamics.compiled_step as compiled_step
 from snapmem.dynamics.compiled_newton import HANDED_BACK
+from snapmem.dynamics.compiled_run import stepwise
 from snapmem.kernels.banded import BandedMatrix
 from snapmem.kernels.bordered import BodyMatrix, bordered_solve
 from snapmem.kernels.linalg import REFINE_ON_CANCELLATION
@@ -282,7 +283,9 @@ def test_domain_is_the_scenes_at_gents_lock():
 
 def test_a_step_handed_back_runs_on_the_general_path(monkeypatch):
     """Where the kernel cannot trust its LDL^T it hands the step back (HANDED_BACK): the stepper
-    then solves it by the general Newton, and the run is the general path's."""
+    then solves it by the general Newton, and the run is the general path's. (The driver's loop a
+    step at a time, which calls the time step from Python; tests/test_compiled_run.py hands the
+    compiled run's attempts back to it.)"""
     ex = experiment("gripper_rod")
     kwargs = dict(rho=ex.rho, damping=ex.damping, q0=ex.q0, options=ex.options, damp_bodies=ex.damp_bodies)
     with snapmem.reference_path():
@@ -294,7 +297,8 @@ def test_a_step_handed_back_runs_on_the_general_path(monkeypatch):
         return args[0], HANDED_BACK, 0, 0, np.nan, args[0], args[0], args[0], np.nan, np.nan
 
     monkeypatch.setattr(compiled_step, "time_step", hand_back)
-    handed = simulate(ex.scene, ex.loads, 5.0, **kwargs)
+    with stepwise():
+        handed = simulate(ex.scene, ex.loads, 5.0, **kwargs)
     assert len(calls) == handed.meta["steps"] + handed.meta["rejected"] > 10
     assert handed.meta["newton_iterations"] == general.meta["newton_iterations"]
     assert np.array_equal(handed["q"], general["q"])

@@ -88,8 +88,7 @@ def experiment(name: str, **params) -> Experiment:
     if name in EXPERIMENTS:
         return EXPERIMENTS[name](scene)
     q0 = None if scene.start_guess is None else scene.start_guess(scene.loads)
-    loads = dict(scene.loads)
-    return Experiment(scene, lambda t: loads, 10.0, 1.0, 1.0, q0=q0)
+    return Experiment(scene, schedule(**scene.loads), 10.0, 1.0, 1.0, q0=q0)
 
 
 def run(name: str, t_end: float | None = None, options: DynamicsOptions | None = None,
@@ -168,8 +167,7 @@ def _ball_drop_experiment(scene: Scene) -> Experiment:
     q_m = _inflated(scene, p["pressure"], scene.loads.get("voltage", 0.0))
     top = q_m[-1]
     q0 = np.concatenate([q_m, [top + p["rb"] + p["drop"]]])
-    loads = dict(scene.loads)
-    return Experiment(scene, lambda t: loads, p["t_end"], p["rho"], p["xi"], q0=q0, damp_bodies=p["damp_ball"] > 0,
+    return Experiment(scene, schedule(**scene.loads), p["t_end"], p["rho"], p["xi"], q0=q0, damp_bodies=p["damp_ball"] > 0,
                       options=_options(p, dt=1e-4, dt_max=0.05))
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from snapmem._lazy import inlined
 from snapmem.dynamics.compiled_assembly import (TANGENT, Balls, GeneralLaw, LinearContacts, Plan, Viscous,
                                                 assemble_entry, contact_gaps, start_networks)
 from snapmem.dynamics.compiled_measures import frames_measures
@@ -41,6 +42,27 @@ from snapmem.model.contact import contact_names
 from snapmem.model.terms import (BallDeclaration, ElectricDeclaration, LawDeclaration, LinearContactDeclaration,
                                  PressureDeclaration, ViscousDeclaration)
 from snapmem.solvers.newton import NewtonReport
+
+
+#: The exponent of :func:`electric_coefficient`, 2.0, passed as a number: numba folds a constant
+#: exponent 2 into phi * phi, which rounds differently from the C library's pow (Python's float
+#: power) in about 0.1% of values.
+SQUARE = 2.0
+
+
+def electric_coefficient(phi, coefficients, square):
+    """a_el = sum over the electric terms of c phi^square [Pa] (square = :data:`SQUARE`): the
+    electric coefficient the kernels take at voltage phi [V], c = eps / (2 H^2) of each term.
+    Written once for Python (:meth:`CompiledStep.kernel_loads`) and the compiled run
+    (:data:`electric_coefficient_compiled`)."""
+    a_el = 0.0
+    for c in coefficients:
+        a_el = a_el + c * phi ** square
+    return a_el
+
+
+#: :func:`electric_coefficient` for compiled code (inlined; Python calls the function itself).
+electric_coefficient_compiled = inlined(electric_coefficient)
 
 
 def _ints(values) -> np.ndarray:
@@ -125,12 +147,13 @@ class CompiledStep:
         """(pressure [Pa], a_el [Pa]) the kernels take for ``loads``: a_el = sum of eps/(2 H^2) phi^2
         over the electric terms. The compiled chamber step calls it per membrane."""
         pressure = float(loads["pressure"]) if self.has_pressure else 0.0
-        a_el = 0                              # sum() of the terms' c phi^2, as a loop (a step's call)
-        if self._electric:
-            phi = float(loads["voltage"])
-            for c in self._electric:
-                a_el = a_el + c * phi ** 2
-        return pressure, float(a_el)          # float64 for numba, always
+        a_el = electric_coefficient(float(loads["voltage"]), self._electric, SQUARE) if self._electric else 0.0
+        return pressure, a_el                 # float64 for numba, always
+
+    @property
+    def electric(self) -> tuple:
+        """The electric terms' coefficients eps / (2 H^2) [F/m^3] (empty without)."""
+        return self._electric
 
     def assemble(self, q, loads, inertia=None, anchor=None, momentum=None):
         """Energy, residual (n_free,), lower band (b + 1, n_band), border (k, n_band), corner (k, k)

@@ -7,22 +7,28 @@ order) chooses what it is anchored at and turns its solution into the new state.
 
 Adaptive steps: a step is cut (by 4) when Newton fails and (by the controller) when the scheme's
 local error estimate exceeds ``tol`` times the membrane's current size; it grows by up to 2x when
-easy. Snaps get small steps, quasi-static ramps large ones. Steps land on the kinks of a
-piecewise-linear load schedule (:mod:`snapmem.dynamics.loads`).
+easy (:mod:`snapmem.dynamics.step_control`). Snaps get small steps, quasi-static ramps large
+ones. Steps land on the kinks of a piecewise-linear load schedule (:mod:`snapmem.dynamics.loads`).
+
+The loop runs here a step at a time, or, where the scene's step is compiled and the loads are a
+schedule, many steps a call in :mod:`snapmem.dynamics.compiled_run`: the same loop, compiled, with
+the same numbers to the bit.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from typing import Callable
 
 import numpy as np
 
+from snapmem.dynamics.compiled_run import DT_MIN, MAX_STEPS, PYTHON_ATTEMPT, CompiledRun
 from snapmem.dynamics.loads import as_schedule, schedule
 from snapmem.dynamics.options import DynamicsOptions
 from snapmem.dynamics.schemes import SCHEME_BY_NAME
+from snapmem.dynamics.step_control import FAILED_CUT, error_ratio, next_step, shrunk_step, step_to_take
 from snapmem.dynamics.stepper import _InternalState, _Recorder, _Stepper
 from snapmem.dynamics.supplies import chamber_parts, lumped_masses_of
 from snapmem.dynamics.trajectory import RunOutcome, Trajectory
@@ -49,6 +55,25 @@ def lumped_masses(scene: Scene, rho: float) -> np.ndarray:
         return lumped_masses_of(scene, rho, lumped_masses)
     m = np.repeat(rho * scene.thickness * scene.node_area, 2)
     return np.concatenate([m, [b.mass for b in scene.bodies]])
+
+
+@dataclass
+class _RunState:
+    """Where a run is: its time t [s], next step dt [s], state q [m], v [m/s] and last acceleration
+    a_prev [m/s^2] (n_dof,), the last step's (q, v, dt) ``history`` (None before the first), and its
+    counts. The Python loop and the compiled one (snapmem.dynamics.compiled_run) both advance it."""
+
+    t: float
+    dt: float
+    q: np.ndarray
+    v: np.ndarray
+    a_prev: np.ndarray
+    history: tuple | None
+    steps: int = 0
+    rejected: int = 0
+    iterations: int = 0
+    fallbacks: int = 0
+    cuts: int = 0
 
 
 def _identical(a: tuple, b: tuple) -> bool:
@@ -82,7 +107,9 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     damp_bodies : bool
         Apply xi to the rigid bodies too (default False: a ball flies freely).
     progress : callable (t, t_end), optional
-        Called after every accepted step.
+        Called as the run advances, with the time reached [s]: after every call of the compiled
+        run (many steps, some 20 ms of work: :mod:`snapmem.dynamics.compiled_run`), or after every
+        accepted step where the loop takes a step at a time.
     stop : callable (t, q, v) -> bool, optional
         Ends the run early (after recording the step) when it returns True.
     resume : dict, optional
@@ -153,43 +180,59 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
     a_prev = acceleration(q, v, t0) if resume is None else np.array(resume["a_prev"], dtype=float)
     t, dt = t0, min(options.dt, max(t_end - t0, options.dt_min)) if resume is None else float(resume["dt"])
     recorder.record(t, q, v, loads_at(t), dt=0.0, iterations=0, force=True, internal=internal.frame())
-    steps = rejected = iterations = fallbacks = cuts = 0
     history = None                                     # (q_{n-1}, v_{n-1}, dt_{n-1}) of the last step
     if resume is not None and resume.get("history") is not None:
         hq, hv, hdt = resume["history"]
         history = (np.array(hq, dtype=float), np.array(hv, dtype=float), float(hdt))
+    run = _RunState(t, dt, q, v, a_prev, history)
     status, outcome = "completed", RunOutcome.completed
     scheme = SCHEME_BY_NAME[options.scheme]
     length = scene.meridian.size
     breaks = [b for b in getattr(at, "breakpoints", []) if t0 < b < t_end]
     t_last = t_end - 1e-12 * max(1.0, abs(t_end))     # a run ends at t >= t_last (rounding of the steps' sum)
     n_node_dofs = scene.n_node_dofs
+    # many steps a call where the step is compiled and the loads a schedule (None: a step at a time)
+    loop = None if chambers is not None else CompiledRun.of(stepper, internal, at, scene, options, t0, t_end, t_last,
+                                                             stop)
+    python_turn = False                                # the next attempt is the Python loop's (handed back)
     held = HeldInterrupts().__enter__()                # SIGINT/SIGTERM noted, taken between two steps
     try:
-        while t < t_last:
+        while run.t < t_last:
             if held.received is not None:
-                status, outcome = f"interrupted at t = {t:.6g} s", RunOutcome.interrupted
+                status, outcome = f"interrupted at t = {run.t:.6g} s", RunOutcome.interrupted
                 break
-            if steps + rejected >= options.max_steps:
+            if loop is not None and not python_turn:
+                ended = loop.advance(run, recorder)
+                if progress is not None:
+                    progress(run.t, t_end)
+                if ended == MAX_STEPS:
+                    status = f"max_steps = {options.max_steps} reached at t = {run.t:.6g} s"
+                    outcome = RunOutcome.max_steps
+                    break
+                if ended == DT_MIN:
+                    status = (f"time step fell below dt_min = {options.dt_min:g} s at t = {run.t:.6g} s "
+                              f"(Newton: {loop.newton_reason()})")
+                    outcome = RunOutcome.dt_min
+                    break
+                python_turn = ended == PYTHON_ATTEMPT
+                continue
+            python_turn = False
+            t, dt, q, v, a_prev, history = run.t, run.dt, run.q, run.v, run.a_prev, run.history
+            if run.steps + run.rejected >= options.max_steps:
                 status, outcome = f"max_steps = {options.max_steps} reached at t = {t:.6g} s", RunOutcome.max_steps
                 break
-            dt = min(dt, t_end - t)
-            upcoming = [b for b in breaks if t + 1e-12 < b < t + dt] if breaks else None
-            if upcoming:                                  # land on schedule kinks
-                dt = upcoming[0] - t
-            if t_end - (t + dt) < 1e-3 * dt:
-                dt = t_end - t
+            dt = step_to_take(t, dt, t_end, breaks)
             anchor = scheme.anchor(q, v, t, dt, history)
             internal.open(scheme, t, dt, history)
             form = anchor.scheme.compiled_outcome(anchor)
             y, report = stepper.solve(anchor.q, anchor.v, anchor.h, loads_at(anchor.load_time), current=anchor.start,
                                       outcome=None if form is None else (*form, a_prev))
             internal.close(y if report.converged else None, dt)
-            iterations += report.iterations
-            cuts += report.step_cuts
+            run.iterations += report.iterations
+            run.cuts += report.step_cuts
             if not report.converged:
-                rejected += 1
-                dt *= 0.25
+                run.rejected += 1
+                run.dt = dt = dt * FAILED_CUT
                 log.debug("t = %.6g: Newton failed (%s); dt -> %.3g", t, report.reason, dt)
                 if dt < options.dt_min:
                     status = f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s (Newton: {report.reason})"
@@ -206,10 +249,10 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 y, report_fallback = stepper.solve(anchor.q, anchor.v, anchor.h, loads_at(anchor.load_time),
                                                    current=anchor.start)
                 internal.close(y if report_fallback.converged else None, dt)
-                iterations += report_fallback.iterations
+                run.iterations += report_fallback.iterations
                 if not report_fallback.converged:
-                    rejected += 1
-                    dt *= 0.25
+                    run.rejected += 1
+                    run.dt = dt = dt * FAILED_CUT
                     if dt < options.dt_min:
                         status = (f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
                                   f"(Newton: {report_fallback.reason})")
@@ -218,44 +261,43 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                     continue
                 q_new, v_new, a_new, est, largest = stepper.outcome(anchor, y, a_prev, free, n_node_dofs)
                 report.iterations += report_fallback.iterations
-                fallbacks += 1
+                run.fallbacks += 1
             order = anchor.scheme.order
             err = 0.0
             if options.adaptive:
-                size = max(length, largest)     # grows with the membrane
-                err = est / (options.tol * size)
+                err = error_ratio(est, options.tol, length, largest)    # relative to the membrane's size
                 if err > 1.0 and dt > options.dt_min:
-                    rejected += 1
-                    dt = max(options.dt_min, dt * max(0.2, 0.9 * err ** (-1.0 / (order + 1))))
+                    run.rejected += 1
+                    run.dt = shrunk_step(dt, err, order, options.dt_min)
                     continue
-            # one assignment, so that an interrupt cannot leave t and the state apart
-            t, history, q, v, a_prev = t + dt, (q, v, dt), q_new, v_new, a_new
+            t = t + dt                 # one assignment, so that an interrupt cannot leave t and the state apart
+            run.t, run.history, run.q, run.v, run.a_prev = t, (q, v, dt), q_new, v_new, a_new
             internal.commit()
-            steps += 1
-            recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations,
+            run.steps += 1
+            recorder.record(t, q_new, v_new, loads_at(t), dt=dt, iterations=report.iterations,
                             force=t >= t_last, internal=internal.frame())
             if progress is not None:
                 progress(t, t_end)
-            if stop is not None and stop(t, q, v):
-                recorder.record(t, q, v, loads_at(t), dt=dt, iterations=report.iterations, force=True,
+            if stop is not None and stop(t, q_new, v_new):
+                recorder.record(t, q_new, v_new, loads_at(t), dt=dt, iterations=report.iterations, force=True,
                                 internal=internal.frame())
+                run.dt = dt
                 break
             if options.adaptive:
-                grow = 2.0 if err == 0.0 else min(2.0, 0.9 * err ** (-1.0 / (order + 1)))
-                if report.iterations > 6:
-                    grow = min(grow, 1.0)
-                dt = min(options.dt_max, max(options.dt_min, dt * grow))
+                run.dt = next_step(dt, err, order, report.iterations, options.dt_min, options.dt_max)
             else:
-                dt = options.dt          # a fixed step returns to its size after a cut or a landing on a kink
+                run.dt = options.dt      # a fixed step returns to its size after a cut or a landing on a kink
     except (KeyboardInterrupt, SystemError) as exc:    # keep what was computed: the frames up to here
         if isinstance(exc, SystemError) and held.received is None:
             held.__exit__(None, None, None)
             raise                                      # not an interrupt (a second one can land in a kernel)
-        status, outcome = f"interrupted at t = {t:.6g} s", RunOutcome.interrupted
+        status, outcome = f"interrupted at t = {run.t:.6g} s", RunOutcome.interrupted
     except BaseException:
         held.__exit__(None, None, None)
         internal.finish()
         raise
+    t, dt, q, v, a_prev, history = run.t, run.dt, run.q, run.v, run.a_prev, run.history
+    steps, rejected, iterations, fallbacks, cuts = run.steps, run.rejected, run.iterations, run.fallbacks, run.cuts
     try:                                               # held until the frames are whole
         if status != "completed":
             log.warning("simulation stopped early: %s", status)

@@ -22,8 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from snapmem.dynamics.step_arithmetic import (BACKWARD_ABSOLUTE, BACKWARD_RELATIVE, MIDPOINT, bdf2_anchor,
-                                              largest_change, largest_entry, step_outcome)
+from snapmem.dynamics.step_arithmetic import (BDF2 as BDF2_KIND, EULER, MIDPOINT, MIDPOINT_RULE, bdf2_anchor,
+                                              largest_change, largest_entry, scheme_step, step_outcome)
+from snapmem.dynamics.step_control import error_estimate
 from snapmem.kernels.switch import compiled
 from snapmem.solvers.rules import _max_abs_numpy
 
@@ -77,6 +78,9 @@ class Anchor:
         Time at which the loads are evaluated [s].
     start : ndarray (n_dof,) or None
         Admissible Newton start when the predictor q + h v is not (None: ``q``).
+    outcome : tuple or None
+        (kind, step) of the step's outcome in snapmem.dynamics.step_arithmetic.step_outcome
+        (:meth:`Scheme.compiled_outcome`).
     """
 
     scheme: Scheme
@@ -86,6 +90,7 @@ class Anchor:
     dt: float
     load_time: float
     start: np.ndarray | None = None
+    outcome: tuple | None = None
 
     def new_state(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(q_{n+1}, v_{n+1}) from the solve's solution y."""
@@ -103,6 +108,9 @@ class Scheme:
     ----------
     name : str
         The name ``DynamicsOptions.scheme`` and the CLI's ``--scheme`` take.
+    kind : int
+        Its number in snapmem.dynamics.step_arithmetic (EULER, MIDPOINT_RULE, BDF2), whose
+        ``scheme_step`` holds its formulas for this class and the compiled run alike.
     order : int
         Order of accuracy; the step controller scales steps by err^(-1 / (order + 1)).
     error_constant : float
@@ -113,6 +121,7 @@ class Scheme:
     """
 
     name: str
+    kind: int
     order: int
     error_constant: float
     fallback: Scheme | None = None
@@ -131,7 +140,8 @@ class Scheme:
         anchor x_hat = c_now x_n + c_previous x_{n-1} and the new state x_{n+1} = n_star y +
         n_now x_n + n_previous x_{n-1}; ``past_dt`` the last step [s] (None: no history). The
         numbers :meth:`anchor` and :meth:`new_state` give on unit states, without building them."""
-        raise NotImplementedError
+        h, *_, c_now, c_previous, n_star, n_now, n_previous = scheme_step(self.kind, 0.0, dt, past_dt)
+        return float(h), c_now, c_previous, n_star, n_now, n_previous
 
     def acceleration(self, anchor: Anchor, v_new: np.ndarray) -> np.ndarray:
         """The mean acceleration over the step (v_{n+1} - v_n) / dt [m/s^2]."""
@@ -149,13 +159,13 @@ class Scheme:
     def estimate(self, dt: float, change) -> float:
         """c dt^2 ``change`` [m]: the local error estimate from the largest change of acceleration
         (Euler: the largest acceleration) [m/s^2]."""
-        return self.error_constant * dt * dt * float(change)
+        return error_estimate(self.error_constant, dt, float(change))
 
     def compiled_outcome(self, anchor: Anchor) -> tuple | None:
         """(kind, step) of this scheme's step in snapmem.dynamics.step_arithmetic.step_outcome, the
         compiled form of :meth:`new_state`, :meth:`acceleration` and :meth:`local_error` together
         (the compiled time step computes it too); None if the scheme has none."""
-        return None
+        return anchor.outcome
 
     def outcome(self, anchor: Anchor, y: np.ndarray, a_prev: np.ndarray, free, n_node_dofs: int) -> tuple:
         """Everything a step yields from the solve's solution y: (q_{n+1}, v_{n+1}, a_{n+1}, the local
@@ -181,16 +191,14 @@ class ImplicitEuler(Scheme):
     Newton's own, so it never penetrates a contact.
     """
 
-    name, order, error_constant = "euler", 1, 0.5
+    name, kind, order, error_constant = "euler", EULER, 1, 0.5
 
     def anchor(self, q, v, t, dt, history):
-        return Anchor(self, q, v, dt, dt, t + dt)
+        h, load_time, kind, step = scheme_step(EULER, t, dt, None)[:4]
+        return Anchor(self, q, v, h, dt, load_time, outcome=(kind, step))
 
     def new_state(self, anchor, y):
         return y, (y - anchor.q) / anchor.h
-
-    def rest_coefficients(self, dt, past_dt):
-        return float(dt), 1.0, 0.0, 1.0, 0.0, 0.0
 
     def local_error(self, dt, a_new, a_prev, free):
         """(dt^2 / 2) max |a_new| over the free degrees of freedom [m]: Euler's local error."""
@@ -200,8 +208,6 @@ class ImplicitEuler(Scheme):
             change = np.abs(a_new)[free].max()
         return self.estimate(dt, change)
 
-    def compiled_outcome(self, anchor):
-        return BACKWARD_ABSOLUTE, anchor.dt
 
 
 class ImplicitMidpoint(Scheme):
@@ -220,24 +226,18 @@ class ImplicitMidpoint(Scheme):
     estimate is (dt^2 / 6) |a_{n+1/2} - a_{n-1/2}|.
     """
 
-    name, order, error_constant = "midpoint", 2, 1.0 / 6.0
+    name, kind, order, error_constant = "midpoint", MIDPOINT_RULE, 2, 1.0 / 6.0
 
     def __init__(self, fallback: Scheme):
         self.fallback = fallback
 
     def anchor(self, q, v, t, dt, history):
-        h = dt / 2
-        return Anchor(self, q, v, h, dt, t + h)
+        h, load_time, kind, step = scheme_step(MIDPOINT_RULE, t, dt, None)[:4]
+        return Anchor(self, q, v, h, dt, load_time, outcome=(kind, step))
 
     def new_state(self, anchor, y):
         q, v, h = anchor.q, anchor.v, anchor.h
         return 2.0 * y - q, 2.0 * (y - q) / h - v
-
-    def rest_coefficients(self, dt, past_dt):
-        return float(dt / 2), 1.0, 0.0, 2.0, -1.0, 0.0
-
-    def compiled_outcome(self, anchor):
-        return MIDPOINT, anchor.dt
 
 
 class BDF2(Scheme):
@@ -253,7 +253,7 @@ class BDF2(Scheme):
     estimate is (2 dt^2 / 9) |a_{n+1} - a_n|.
     """
 
-    name, order, error_constant = "bdf2", 2, 2.0 / 9.0
+    name, kind, order, error_constant = "bdf2", BDF2_KIND, 2, 2.0 / 9.0
 
     def __init__(self, start: Scheme):
         self.start = start
@@ -261,20 +261,18 @@ class BDF2(Scheme):
     def anchor(self, q, v, t, dt, history):
         if history is None:
             return self.start.anchor(q, v, t, dt, history)
-        a0, a1, a2 = self.weights(dt, history[2])
-        h = dt / a0
+        h, load_time, kind, step, a0, a1, a2 = scheme_step(BDF2_KIND, t, dt, history[2])[:7]
         if _states(q, v, history[0], history[1]):
             x_hat, v_hat = _kernel("bdf2_anchor")(q, v, history[0], history[1], float(a0), float(a1), float(a2))
         else:
             x_hat = -(a1 * q + a2 * history[0]) / a0
             v_hat = -(a1 * v + a2 * history[1]) / a0
-        return Anchor(self, x_hat, v_hat, h, dt, t + dt, start=q)
+        return Anchor(self, x_hat, v_hat, h, dt, load_time, start=q, outcome=(kind, step))
 
     @staticmethod
     def weights(dt: float, past_dt: float) -> tuple:
         """(a0, a1, a2) of the variable step (w = dt / past_dt)."""
-        w = dt / past_dt
-        return (1 + 2 * w) / (1 + w), -(1 + w), w * w / (1 + w)
+        return scheme_step(BDF2_KIND, 0.0, dt, past_dt)[4:7]
 
     def new_state(self, anchor, y):
         return y, (y - anchor.q) / anchor.h
@@ -282,15 +280,11 @@ class BDF2(Scheme):
     def rest_coefficients(self, dt, past_dt):
         if past_dt is None:
             return self.start.rest_coefficients(dt, past_dt)
-        a0, a1, a2 = self.weights(dt, past_dt)
-        return float(dt / a0), float(-(a1 * 1.0) / a0), float(-(a2 * 1.0) / a0), 1.0, 0.0, 0.0
+        return super().rest_coefficients(dt, past_dt)
 
     def acceleration(self, anchor, v_new):
         """a_{n+1} = (v_{n+1} - v_hat) / h [m/s^2]."""
         return (v_new - anchor.v) / anchor.h
-
-    def compiled_outcome(self, anchor):
-        return BACKWARD_RELATIVE, anchor.h
 
 
 _EULER = ImplicitEuler()

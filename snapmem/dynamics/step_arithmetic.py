@@ -16,7 +16,7 @@ cold run's time in them): as their twins, the numpy expressions they replace.
 from __future__ import annotations
 
 import numpy as np
-from snapmem._lazy import njit
+from snapmem._lazy import inlined, njit
 from snapmem.solvers.rules import _max_abs_numpy, max_abs
 
 
@@ -119,3 +119,36 @@ def _step_outcome_python(kind, y, q, v, h, step, a_previous, free, n_node_dofs):
     else:
         change = _largest_change_python(a, a_previous, free)
     return q_new, v_new, a, change, _max_abs_numpy(q_new[:n_node_dofs])
+
+
+
+#: The schemes, by number (each :class:`snapmem.dynamics.schemes.Scheme`'s ``kind``), as the
+#: compiled run (snapmem.dynamics.compiled_run) takes them.
+EULER, MIDPOINT_RULE, BDF2 = range(3)
+
+
+def scheme_step(kind, t, dt, past_dt):
+    """Every number of a step of scheme ``kind`` (EULER, MIDPOINT_RULE, BDF2) from t by dt [s]:
+    the schemes' formulas (snapmem.dynamics.schemes, which documents them), written once for
+    the Python schemes and the compiled run. ``past_dt``: the last step [s] (BDF2 only; BDF2
+    with no history takes EULER's step).
+
+    Returns (h, load_time, outcome_kind, outcome_step, a0, a1, a2, c_now, c_previous, n_star,
+    n_now, n_previous): the step h of the backward-Euler solve [s] and the time of its loads
+    [s]; :func:`step_outcome`'s kind and step; BDF2's weights (a0, a1, a2) (w = dt / past_dt,
+    a0 = (1 + 2w) / (1 + w), a1 = -(1 + w), a2 = w^2 / (1 + w); (1, -1, 0) for the others); the
+    maps of the step on a state at rest (``Scheme.rest_coefficients``): the anchor c_now x_n +
+    c_previous x_{n-1} and the new state n_star y + n_now x_n + n_previous x_{n-1}."""
+    if kind == EULER:
+        return dt, t + dt, BACKWARD_ABSOLUTE, dt, 1.0, -1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0
+    if kind == MIDPOINT_RULE:
+        h = dt / 2
+        return h, t + h, MIDPOINT, dt, 1.0, -1.0, 0.0, 1.0, 0.0, 2.0, -1.0, 0.0
+    w = dt / past_dt
+    a0, a1, a2 = (1 + 2 * w) / (1 + w), -(1 + w), w * w / (1 + w)
+    h = dt / a0
+    return h, t + dt, BACKWARD_RELATIVE, h, a0, a1, a2, -(a1 * 1.0) / a0, -(a2 * 1.0) / a0, 1.0, 0.0, 0.0
+
+
+#: :func:`scheme_step` for compiled code (inlined; Python calls the function itself).
+scheme_step_compiled = inlined(scheme_step)

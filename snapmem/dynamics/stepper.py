@@ -242,6 +242,16 @@ class _InternalState:
         self.previous = None if previous is None else [np.array(z, dtype=float) for z in previous]
         self.dissipated = float(saved.get("dissipated", 0.0))
 
+    def adopt(self, zeta: np.ndarray, previous: np.ndarray | None, dissipated: float) -> None:
+        """Take the state a compiled run (snapmem.dynamics.compiled_run) advanced the one term to: its
+        internal log stretches ``zeta`` and last ones ``previous`` (K, 2, E; None: no history),
+        the dissipation [J] since the start (the arrays are copied: the run keeps writing its own)."""
+        term = self.terms[0]
+        term.commit(zeta.copy())
+        self.previous = None if previous is None else [previous.copy()]
+        self.dissipated = float(dissipated)
+        self._news, self._pending = [np.empty_like(zeta)], None
+
     def set_frame(self, zeta: np.ndarray) -> None:
         """Put a frame's internal log stretches ``zeta`` (K, 2, E) back into the terms (to measure it)."""
         start = 0
@@ -269,6 +279,19 @@ class _InternalState:
         start. An empty mapping without networks. The same object at every step: it reads the
         state when the recorder reads it."""
         return self._frame if self.terms else {}
+
+
+class _Block:
+    """Frames the compiled run recorded (:meth:`_Recorder.add_frames`): ``columns`` by key, each with
+    a leading frame axis, and every frame's ``loads``; :meth:`pop` drops the last frame."""
+
+    __slots__ = ("columns", "loads", "t")
+
+    def __init__(self, columns: dict, loads: list):
+        self.columns, self.loads, self.t = columns, loads, columns["t"]
+
+    def pop(self) -> None:
+        self.t = self.t[:-1]
 
 
 class _NetworksFrame(Mapping):
@@ -338,7 +361,12 @@ class _Recorder:
             self.min_gap = min(self.min_gap, self._gap(q))
             return
         rows = self.rows
-        if rows and rows[-1]["t"] == t:
+        if rows and type(rows[-1]) is _Block:
+            if rows[-1].t[-1] == t:
+                rows[-1].pop()
+                if not rows[-1].t.size:
+                    rows.pop()
+        elif rows and rows[-1]["t"] == t:
             rows.pop()
         kinetic = 0.5 * float(self.mass @ (v * v))
         if type(internal) is _NetworksFrame:        # the networks' values now, read once
@@ -348,23 +376,50 @@ class _Recorder:
         self.last_t = t
         self.min_gap = np.inf
 
-    def _measures(self, Q, loads):
-        """Potential energy, volume, smallest gap (T,) and contact report columns of the frames Q."""
-        viscous = self.internal is not None and bool(self.internal.terms)
+    def add_frames(self, block: dict, loads: list) -> None:
+        """Frames the compiled run recorded (snapmem.dynamics.compiled_run): ``block`` the columns a
+        row has (``t``, ``q``, ... with a leading frame axis; ``kinetic`` is computed here, by the
+        rows' formula), ``loads`` each frame's resolved loads."""
+        mass = self.mass
+        block["kinetic"] = np.array([0.5 * float(mass @ (v * v)) for v in block["v"]])
+        self.rows.append(_Block(block, loads))
+
+    def _frames(self) -> tuple[dict, list]:
+        """Every frame's recorded values as arrays by key (the rows' and the compiled blocks', in
+        their order; the same arrays as the rows alone would give) and every frame's loads."""
+        if all(type(row) is dict for row in self.rows):
+            data = {k: np.array([row[k] for row in self.rows]) for k in self.rows[0] if k != "loads"}
+            return data, [row["loads"] for row in self.rows]
+        keys = [k for k in self.rows[0] if k != "loads"]
+        columns, loads = {k: [] for k in keys}, []
+        for row in self.rows:
+            if type(row) is _Block:
+                for k in keys:
+                    columns[k].extend(row.columns[k][: row.t.size])
+                loads.extend(row.loads[: row.t.size])
+            else:
+                for k in keys:
+                    columns[k].append(row[k])
+                loads.append(row["loads"])
+        return {k: np.array(values) for k, values in columns.items()}, loads
+
+    def _measures(self, Q, loads, zetas):
+        """Potential energy, volume, smallest gap (T,) and contact report columns of the frames Q
+        (``zetas``: the networks' internal log stretches of every frame, (T, K, 2, E), or None)."""
         if self.compiled is not None:
             energy, volume, gap, columns = self.compiled.measures_many(Q, loads)
-            if viscous:                                              # the networks' stored energy of each frame
-                energy = energy + self.internal.stored_energies(Q, np.array([row["zeta"] for row in self.rows]))
+            if zetas is not None:                                    # the networks' stored energy of each frame
+                energy = energy + self.internal.stored_energies(Q, zetas)
             return energy, volume, gap, columns
         scene = self.scene
         reports = [contact_report(scene, q) for q in Q]
         columns = {k: np.array([r[k] for r in reports]) for k in (reports[0] if reports else {})}
-        if viscous:       # each frame's networks' stored energy
+        if zetas is not None:       # each frame's networks' stored energy
             energies = []
-            for q, each, row in zip(Q, loads, self.rows):
-                self.internal.set_frame(row["zeta"])
+            for q, each, zeta in zip(Q, loads, zetas):
+                self.internal.set_frame(zeta)
                 energies.append(scene.energy(q, each))
-            self.internal.set_frame(self.rows[-1]["zeta"])
+            self.internal.set_frame(zetas[-1].copy())
             return (np.array(energies), np.array([scene.volume(q) for q in Q]), np.array([self._gap(q) for q in Q]),
                     columns)
         return (np.array([scene.energy(q, each) for q, each in zip(Q, loads)]),
@@ -372,11 +427,11 @@ class _Recorder:
 
     def trajectory(self, meta) -> Trajectory:
         """The frames as arrays; node coordinates and body heights and speeds split off q and v."""
-        loads = [row["loads"] for row in self.rows]
-        data = {k: np.array([row[k] for row in self.rows]) for k in self.rows[0] if k != "loads"}
-        potential, volume, gap, contacts = self._measures(data["q"], loads)
-        if "zeta" in data:                                  # the networks' internal stretches
-            data["xi"] = np.exp(data.pop("zeta"))
+        data, loads = self._frames()
+        zetas = data.pop("zeta", None)                        # the networks' internal log stretches
+        potential, volume, gap, contacts = self._measures(data["q"], loads, zetas)
+        if zetas is not None:
+            data["xi"] = np.exp(zetas)
         data.update(volume=volume, potential=potential, total=data["kinetic"] + potential,
                     min_gap=np.minimum(data["min_gap"], gap))
         for name in loads[0]:
