@@ -40,10 +40,12 @@ from snapmem.dynamics.compiled_newton import CONVERGED, HANDED_BACK, OUTCOMES, t
 from snapmem.dynamics.compiled_step import SQUARE, CompiledStep, electric_coefficient_compiled
 from snapmem.dynamics.loads import Constant, PiecewiseLinear, interpolate_compiled
 from snapmem.dynamics.schemes import SCHEME_BY_NAME
-from snapmem.dynamics.step_arithmetic import BDF2, bdf2_anchor, scheme_step_compiled
+from snapmem.dynamics.step_arithmetic import BDF2, EULER, MIDPOINT_RULE, bdf2_anchor, scheme_step_compiled
 from snapmem.dynamics.step_control import (FAILED_CUT, error_estimate_compiled, error_ratio_compiled,
                                            next_step_compiled, shrunk_step_compiled, step_to_take_compiled)
 
+#: The schemes the compiled run knows (step_arithmetic.scheme_step's kinds; another runs on the Python loop).
+KINDS = (EULER, MIDPOINT_RULE, BDF2)
 #: How a :func:`run_steps` call ends.
 (PAUSED, FINISHED, MAX_STEPS, DT_MIN, PYTHON_ATTEMPT) = range(5)
 
@@ -384,7 +386,8 @@ class CompiledRun:
         step = getattr(stepper, "compiled", None)
         parts = getattr(loads, "parts", None)
         if (not _enabled[0] or stop is not None or type(step) is not CompiledStep or parts is None
-                or not all(type(p) in (PiecewiseLinear, Constant) for p in parts.values())):
+                or not all(type(p) in (PiecewiseLinear, Constant) for p in parts.values())
+                or getattr(SCHEME_BY_NAME[options.scheme], "kind", None) not in KINDS):
             return None
         if internal.terms and (len(internal.terms) != 1 or step.viscous_term is not internal.terms[0]):
             return None
@@ -407,8 +410,8 @@ class CompiledRun:
                             pressure=names.index("pressure") if step.has_pressure else -1,
                             voltage=names.index("voltage") if step.electric else -1,
                             electric=np.array(step.electric, dtype=float), square=SQUARE)
-        kinds = sorted(SCHEME_BY_NAME.values(), key=lambda s: s.kind)
         scheme = SCHEME_BY_NAME[options.scheme]
+        kinds = [next(s for s in SCHEME_BY_NAME.values() if getattr(s, "kind", None) == k) for k in KINDS]
         newton = options.newton
         control = Control(
             scheme=scheme.kind, start=np.array([getattr(s, "start", s).kind for s in kinds], dtype=np.int64),
