@@ -174,3 +174,51 @@ def test_a_schedule_lands_on_its_kinks_and_reads_its_parts():
     assert step_to_take(5.0, 2.0, 30.0, loads.breakpoints) == 2.0            # already on it
     assert step_to_take(29.0, 0.9995, 30.0, loads.breakpoints) == 1.0        # no sliver before t_end
     assert step_to_take(29.5, 2.0, 30.0, loads.breakpoints) == 0.5
+
+
+def _compiled_copy(kernel, arity):
+    """A Python-callable njit function of ``arity`` arguments that calls the inlined formula
+    ``kernel`` (which has no Python entry point of its own)."""
+    numba = pytest.importorskip("numba")
+    inner = getattr(kernel, "dispatcher", kernel)
+    names = ", ".join(f"a{i}" for i in range(arity))
+    namespace = {"inner": inner}
+    exec(f"def call({names}):\n    return inner({names})", namespace)
+    return numba.njit(namespace["call"])
+
+
+def _formula_cases(rng):
+    """(name, Python formula, its compiled copy, argument tuples) of every formula both loops call."""
+    from snapmem.dynamics import compiled_step, loads, step_arithmetic, step_control
+    times = np.array([0.0, 1.5, 1.5, 4.0, 10.0])
+    values = np.array([0.0, 2.0, -3.0, 5.5, 5.5])
+    dts = 10.0 ** rng.uniform(-6, 0, 200)
+    errs = 10.0 ** rng.uniform(-4, 3, 200)
+    return [
+        ("interpolate", loads.interpolate, loads.interpolate_compiled,
+         [(float(t), times, values) for t in np.concatenate([rng.uniform(-2, 12, 200), times])]),
+        ("electric_coefficient", compiled_step.electric_coefficient, compiled_step.electric_coefficient_compiled,
+         [(float(phi), np.array([1.7e-7, 3.1e-9]), compiled_step.SQUARE) for phi in rng.uniform(-5e3, 5e3, 4000)]),
+        ("scheme_step", step_arithmetic.scheme_step, step_arithmetic.scheme_step_compiled,
+         [(k, float(t), float(dt), float(p)) for k in (0, 1, 2)
+          for t, dt, p in zip(rng.uniform(0, 5, 60), dts, dts[::-1])]),
+        ("step_to_take", step_control.step_to_take, step_control.step_to_take_compiled,
+         [(float(t), float(dt), 10.0, times) for t, dt in zip(rng.uniform(0, 10, 200), 10 * dts)]),
+        ("shrunk_step", step_control.shrunk_step, step_control.shrunk_step_compiled,
+         [(float(dt), float(1.0 + e), o, 1e-9) for dt, e, o in zip(dts, errs, [1, 2] * 100)]),
+        ("next_step", step_control.next_step, step_control.next_step_compiled,
+         [(float(dt), float(e), o, i, 1e-9, 0.05) for dt, e, o, i in zip(dts, errs, [1, 2] * 100, range(200))]),
+        ("error_ratio", step_control.error_ratio, step_control.error_ratio_compiled,
+         [(float(e), 1e-4, 0.05, float(s)) for e, s in zip(errs, rng.uniform(0, 0.1, 200))]),
+    ]
+
+
+@pytest.mark.parametrize("index", range(7))
+def test_each_formula_gives_the_same_bits_compiled(index):
+    """The formulas both loops call, in Python and as the kernel inlines them: the same numbers to
+    the bit (a constant exponent would not be: electric_coefficient takes it as an argument)."""
+    name, python, kernel, cases = _formula_cases(np.random.default_rng(index))[index]
+    compiled = _compiled_copy(kernel, len(cases[0]))
+    for args in cases:
+        expected, got = python(*args), compiled(*args)
+        assert np.array_equal(np.asarray(expected, dtype=float), np.asarray(got, dtype=float)), (name, args)
