@@ -287,8 +287,8 @@ class CompiledRun:
     CALL_TIME = 0.02
 
     def __init__(self, stepper, internal, control: Control, schedule: Schedule, names: list, defaults: dict):
-        step = stepper.compiled
-        n, self.step, self.internal, self.control, self.schedule = stepper.mass.size, step, internal, control, schedule
+        step, n = stepper.compiled, stepper.mass.size
+        self.internal, self.control, self.schedule = internal, control, schedule
         self._names, self._defaults = names, defaults           # the schedule's loads (rows of its tables)
         self.run = Run(clock=np.zeros(6), counts=np.zeros(8, dtype=np.int64), q=np.empty(n), v=np.empty(n),
                        a=np.empty(n), q_past=np.empty(n), v_past=np.empty(n))
@@ -392,7 +392,7 @@ class CompiledRun:
         if internal.terms and (len(internal.terms) != 1 or step.viscous_term is not internal.terms[0]):
             return None
         defaults = scene.resolve_loads({})
-        tables = {name: part for name, part in parts.items()}
+        tables = dict(parts)                     # a table per load the kernels or the frames read
         for name, needed in (("pressure", step.has_pressure), ("voltage", bool(step.electric))):
             if needed and name not in tables:
                 tables[name] = Constant(float(defaults[name]))
