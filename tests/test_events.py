@@ -112,3 +112,32 @@ def test_loss_of_tension_stops_where_the_smallest_tension_reaches_zero():
     j = int(np.flatnonzero(plain["point"] == "LT")[0])
     assert plain["voltage"].iloc[j] == pytest.approx(t["voltage"].iloc[-1], rel=1e-9)
     assert plain["min_tension"].iloc[j - 1] > 0 >= plain["min_tension"].iloc[j + 1]
+
+
+def test_a_branch_that_closes_on_itself_ends_where_it_comes_back():
+    """The VHB balloon traced in voltage at 300 Pa, 101 nodes, goes past its branch points onto a
+    closed loop between two limit points (at 41-81 nodes it runs to loss of ellipticity instead).
+    Before ClosedBranch the trace went round it until max_steps (2000 steps, 43 EMI rows of the
+    same two folds); now it ends where it meets its first fold again, each fold reported once."""
+    scene = build_scene("balloon", nodes=101, with_loads=("voltage",), material="gent", mu=5e4, Jlim=110.0,
+                        eps=4.5 * 8.854e-12, R=0.02, H=2e-4, pressure=300.0, voltage=0.0)
+    branch = trace(scene, "voltage", until={"stretch_max": 3.0})
+    assert branch.outcome is Outcome.CLOSED and branch.outcome.value == "closed"
+    folds = branch.points[branch.points["kind"] == "EMI"]
+    assert len(folds) == 3 and len(branch.table) < 200
+    first_on_loop = folds["voltage"].iloc[1]
+    assert branch.status == f"the branch closed on itself: back at its limit point at voltage = {first_on_loop:.6g}"
+    assert branch.table["voltage"].iloc[-1] == pytest.approx(first_on_loop, rel=1e-6)
+    assert branch.states[-1].kind is PointKind.END
+
+
+def test_closed_branch_tells_one_limit_point_from_another():
+    from snapmem.continuation.branch import Point
+    from snapmem.continuation.events import ClosedBranch
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal(50)
+    fold = Point(x=x, lam=2664.342, kind=PointKind.LP)
+    assert ClosedBranch.same(fold, Point(x=x * (1 + 1e-8), lam=2664.342 * (1 + 1e-8)))
+    assert not ClosedBranch.same(fold, Point(x=x + 3e-2 * np.linalg.norm(x) / 7.0, lam=2664.342))
+    assert not ClosedBranch.same(fold, Point(x=x, lam=2750.38))
+    assert ClosedBranch.same(Point(x=x, lam=0.0), Point(x=x, lam=0.0))

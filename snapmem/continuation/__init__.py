@@ -8,7 +8,7 @@ predictor-corrector loop, :func:`trace`), ``events`` (what the loop watches for)
 """
 
 from snapmem.continuation.branch import Branch, Outcome, Point, PointKind, load_points
-from snapmem.continuation.events import (CriticalPoints, Event, Found, LossOfTension, SaveAt, Step, Stop,
+from snapmem.continuation.events import (ClosedBranch, CriticalPoints, Event, Found, LossOfTension, SaveAt, Step, Stop,
                                          StopAtFirstLimit, Until, events_from)
 from snapmem.continuation.folds import fold_curve
 from snapmem.continuation.options import CONTROLS, ContinuationOptions, FoldOptions
@@ -23,7 +23,8 @@ __all__ = [
     "Point", "PointKind", "Branch", "Outcome", "load_points",
     "LoadProblem", "VolumeProblem", "make_problem",
     "Tracer", "trace", "snap_by_tracing",
-    "Event", "Step", "Found", "Stop", "CriticalPoints", "SaveAt", "Until", "StopAtFirstLimit", "LossOfTension",
+    "Event", "Step", "Found", "Stop", "CriticalPoints", "ClosedBranch", "SaveAt", "Until", "StopAtFirstLimit",
+    "LossOfTension",
     "events_from",
     "fold_curve",
     "Diagram", "Connection", "read_diagram", "switch_branch", "bifurcation_direction",

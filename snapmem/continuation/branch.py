@@ -45,6 +45,7 @@ class Outcome(str, Enum):
     TENSION_LOST = "tension_lost"          #: a :class:`~snapmem.continuation.events.LossOfTension` event stopped it
     STOPPED = "stopped"                    #: an event passed to ``trace`` stopped it
     ELLIPTICITY_LOST = "ellipticity_lost"  #: the membrane lost strong ellipticity (:class:`~snapmem.continuation.events.LossOfEllipticity`)
+    CLOSED = "closed"                      #: the branch came back to a limit point it had passed (:class:`~snapmem.continuation.events.ClosedBranch`)
 
 
 @dataclass

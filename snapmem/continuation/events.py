@@ -10,7 +10,7 @@ one ends the trace after the new point; the events after it are still called (on
 earlier).
 
 The tracer builds its events from the options and ``until`` (:func:`events_from`), in this
-order: :class:`CriticalPoints`, :class:`LossOfEllipticity`, :class:`LossOfTension` (recording
+order: :class:`CriticalPoints`, :class:`ClosedBranch`, :class:`LossOfEllipticity`, :class:`LossOfTension` (recording
 kind LT, not stopping), :class:`ElectricalBreakdown` and :class:`Rupture` (recording EB and RU,
 where the scene sets those limits), :class:`SaveAt`, :class:`Until`, :class:`StopAtFirstLimit`, then
 those passed as ``trace(..., events=[...])``. A new event is a subclass of :class:`Event`; no
@@ -27,6 +27,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
+
+import numpy as np
 
 from snapmem.continuation.branch import Outcome, Point, PointKind
 from snapmem.continuation.locate import locate_critical, locate_value, touching
@@ -117,6 +119,39 @@ class CriticalPoints(Event):
         if len(step.points) >= 2:
             return Found(touching(step.tracer, step.points[-2], previous, new))
         return None
+
+
+class ClosedBranch(Event):
+    """Stop where the branch comes back to a limit point it has passed: it is closed (an isola, or
+    a loop the trace entered at a branch point), and the trace would go round it until
+    ``max_steps``, reporting its limit points again each time. The point located there ends the
+    branch (kind END, outcome CLOSED), so that every critical point of the loop is reported once.
+    Watching the limit points is enough: a closed branch has at least two, where the control
+    reaches its extremes along it. Two limit points are the same when their control values and
+    states agree to TOLERANCE, relative (a loop's limit point located again differs by 1e-8 in
+    the cases seen; two different ones by far more)."""
+
+    TOLERANCE = 1e-5
+
+    def check(self, step: Step) -> Found | None:
+        for point in step.found:
+            if point.kind != PointKind.LP:
+                continue
+            earlier = next((p for p in step.points if p.kind == PointKind.LP and self.same(p, point)), None)
+            if earlier is not None:
+                point.kind = PointKind.END
+                control = step.tracer.pb.control
+                return Found(stop=Stop(Outcome.CLOSED, f"the branch closed on itself: back at its limit point at "
+                                                       f"{control} = {earlier.lam:.6g}", point))
+        return None
+
+    @classmethod
+    def same(cls, a: Point, b: Point) -> bool:
+        """Whether two points are one: control and state within TOLERANCE of each other, relative."""
+        tol = cls.TOLERANCE
+        scale = max(float(np.linalg.norm(a.x)), float(np.linalg.norm(b.x)), np.finfo(float).tiny)
+        return (abs(a.lam - b.lam) <= tol * max(abs(a.lam), abs(b.lam), np.finfo(float).tiny)
+                and float(np.linalg.norm(a.x - b.x)) <= tol * scale)
 
 
 class SaveAt(Event):
@@ -274,7 +309,7 @@ def events_from(options: ContinuationOptions, until: Mapping[str, float] | None 
     :class:`Rupture`)."""
     events: list[Event] = []
     if options.stability:
-        events.append(CriticalPoints())
+        events += [CriticalPoints(), ClosedBranch()]
     events += [LossOfEllipticity(), LossOfTension(stop=False)]
     limits = FailureLimits() if scene is None else FailureLimits.of(scene)
     if limits.E_breakdown is not None:
