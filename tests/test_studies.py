@@ -114,3 +114,17 @@ def test_contact_barrier(tmp_path):
     assert (t["drop_min_gap"] > 0).all() and (t["gripper_min_gap"] > 0).all()
     assert t["drop_impact"].lt(t["drop_bounce"]).all() and t["drop_bounce"].lt(t["drop_rebound"]).all()
     assert t.loc[1e-3, "rest_height_rel"] == 0.0                 # the finest barrier of the quick grid
+
+
+def test_failure_cost(tmp_path):
+    """The benchmark times what it says: with the checks, the balloon under pressure locates EB
+    (one more point), without them no EB and no RU; every other event the same. (Its timings are
+    not asserted: they are the benchmark's output.)"""
+    t = run("failure_cost", tmp_path)("failure_cost").set_index(["design", "control"])
+    pressure = t.loc[("balloon", "pressure")]
+    assert "EB" in pressure["events_checked"].split() and pressure["points"] == pressure["points_unchecked"] + 1
+    for (design, control), row in t.iterrows():
+        unchecked = row["events_unchecked"].split()
+        assert "EB" not in unchecked and "RU" not in unchecked
+        assert [e for e in row["events_checked"].split() if e not in ("EB", "RU")] == unchecked
+        assert np.isfinite(row["cost_ratio_median"]) and row["pairs"] == 3
