@@ -76,6 +76,17 @@ class _RunState:
     cuts: int = 0
 
 
+def _max_steps_reached(options: DynamicsOptions, t: float) -> tuple:
+    """(status, outcome) of a run that reached ``options.max_steps`` at t [s]."""
+    return f"max_steps = {options.max_steps} reached at t = {t:.6g} s", RunOutcome.max_steps
+
+
+def _dt_min_reached(options: DynamicsOptions, t: float, reason: str) -> tuple:
+    """(status, outcome) of a run whose step fell below ``options.dt_min`` at t [s], Newton failing for ``reason``."""
+    return (f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s (Newton: {reason})",
+            RunOutcome.dt_min)
+
+
 def _identical(a: tuple, b: tuple) -> bool:
     """Whether the tuples hold the same objects, one by one."""
     return len(a) == len(b) and all(x is y for x, y in zip(a, b))
@@ -206,20 +217,17 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 if progress is not None:
                     progress(run.t, t_end)
                 if ended == MAX_STEPS:
-                    status = f"max_steps = {options.max_steps} reached at t = {run.t:.6g} s"
-                    outcome = RunOutcome.max_steps
+                    status, outcome = _max_steps_reached(options, run.t)
                     break
                 if ended == DT_MIN:
-                    status = (f"time step fell below dt_min = {options.dt_min:g} s at t = {run.t:.6g} s "
-                              f"(Newton: {loop.newton_reason()})")
-                    outcome = RunOutcome.dt_min
+                    status, outcome = _dt_min_reached(options, run.t, loop.newton_reason())
                     break
                 python_turn = ended == PYTHON_ATTEMPT
                 continue
             python_turn = False
             t, dt, q, v, a_prev, history = run.t, run.dt, run.q, run.v, run.a_prev, run.history
             if run.steps + run.rejected >= options.max_steps:
-                status, outcome = f"max_steps = {options.max_steps} reached at t = {t:.6g} s", RunOutcome.max_steps
+                status, outcome = _max_steps_reached(options, t)
                 break
             dt = step_to_take(t, dt, t_end, breaks)
             anchor = scheme.anchor(q, v, t, dt, history)
@@ -235,8 +243,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                 run.dt = dt = dt * FAILED_CUT
                 log.debug("t = %.6g: Newton failed (%s); dt -> %.3g", t, report.reason, dt)
                 if dt < options.dt_min:
-                    status = f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s (Newton: {report.reason})"
-                    outcome = RunOutcome.dt_min
+                    status, outcome = _dt_min_reached(options, t, report.reason)
                     break
                 continue
             q_new, v_new, a_new, est, largest = stepper.outcome(anchor, y, a_prev, free, n_node_dofs)
@@ -254,9 +261,7 @@ def simulate(scene: Scene, loads=None, t_end: float = 1.0, rho: float = 1.0, dam
                     run.rejected += 1
                     run.dt = dt = dt * FAILED_CUT
                     if dt < options.dt_min:
-                        status = (f"time step fell below dt_min = {options.dt_min:g} s at t = {t:.6g} s "
-                                  f"(Newton: {report_fallback.reason})")
-                        outcome = RunOutcome.dt_min
+                        status, outcome = _dt_min_reached(options, t, report_fallback.reason)
                         break
                     continue
                 q_new, v_new, a_new, est, largest = stepper.outcome(anchor, y, a_prev, free, n_node_dofs)

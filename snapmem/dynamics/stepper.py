@@ -387,9 +387,6 @@ class _Recorder:
     def _frames(self) -> tuple[dict, list]:
         """Every frame's recorded values as arrays by key (the rows' and the compiled blocks', in
         their order; the same arrays as the rows alone would give) and every frame's loads."""
-        if all(type(row) is dict for row in self.rows):
-            data = {k: np.array([row[k] for row in self.rows]) for k in self.rows[0] if k != "loads"}
-            return data, [row["loads"] for row in self.rows]
         keys = [k for k in self.rows[0] if k != "loads"]
         columns, loads = {k: [] for k in keys}, []
         for row in self.rows:
